@@ -1,0 +1,15 @@
+"""fusiongs: deblur blurry RGB video with an event camera and fit a 3D Gaussian Splatting scene.
+
+The package is layered; lower layers never import higher ones::
+
+    render/  scene/  camera/      Gaussian splatting, Gaussian parameters, poses in time
+    events/  frames/  io/         data containers, readers, CFA, high-pass filter, simulator
+    losses/  train/  eval/        the fusion method, its training loop and its evaluation
+    cli.py                        ``fusiongs <verb>``
+"""
+
+__version__ = "0.1.0"
+
+from fusiongs.errors import FusionGSError, InputError
+
+__all__ = ["FusionGSError", "InputError", "__version__"]

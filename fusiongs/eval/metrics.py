@@ -1,0 +1,78 @@
+"""Image quality metrics following the evaluation protocol of ../shared/METHOD.md §8.
+
+PSNR and SSIM are computed on 8-bit sRGB images (values quantised to k/255). SSIM uses a Gaussian
+window (σ = 1.5, 11 taps), population (not sample) covariances and only the window positions that fit
+inside the image (Wang et al., IEEE TIP 2004; identical to ``kornia.metrics.ssim`` with
+``padding='valid'`` and to scikit-image with ``gaussian_weights=True, use_sample_covariance=False``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from fusiongs.errors import InputError
+
+
+def quantize8(img: np.ndarray | torch.Tensor) -> np.ndarray:
+    """Clip to [0, 1] and round to 8 bits; returns float64 ``[H, W, C]`` values k/255."""
+    a = img.detach().cpu().numpy() if isinstance(img, torch.Tensor) else np.asarray(img)
+    a = a.astype(np.float64)
+    if a.ndim == 2:
+        a = a[..., None]
+    return np.round(np.clip(a, 0.0, 1.0) * 255.0) / 255.0
+
+
+def _check_pair(pred: np.ndarray, gt: np.ndarray) -> None:
+    if pred.shape != gt.shape:
+        raise InputError("metrics", "image shape", f"prediction and truth of equal shape {gt.shape}",
+                         pred.shape)
+
+
+def psnr(pred: np.ndarray | torch.Tensor, gt: np.ndarray | torch.Tensor) -> float:
+    """PSNR in dB between two sRGB images ``[H, W, C]`` in [0, 1], after 8-bit quantisation."""
+    p, g = quantize8(pred), quantize8(gt)
+    _check_pair(p, g)
+    mse = float(np.mean((p - g) ** 2))
+    return float("inf") if mse == 0.0 else float(10.0 * np.log10(1.0 / mse))
+
+
+def ssim(pred: np.ndarray | torch.Tensor, gt: np.ndarray | torch.Tensor) -> float:
+    """SSIM between two sRGB images ``[H, W, C]`` in [0, 1], after 8-bit quantisation."""
+    import kornia
+
+    p, g = quantize8(pred), quantize8(gt)
+    _check_pair(p, g)
+    if min(p.shape[0], p.shape[1]) < 11:
+        raise InputError("metrics", "image size", "at least 11x11 pixels for SSIM", p.shape[:2])
+    tp = torch.from_numpy(p).permute(2, 0, 1)[None]
+    tg = torch.from_numpy(g).permute(2, 0, 1)[None]
+    m = kornia.metrics.ssim(tp, tg, window_size=11, max_val=1.0, padding="valid")
+    return float(m.mean())
+
+
+def affine_fit(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
+    """Per-channel least-squares affine correction ``a_c·pred + b_c`` of ``pred`` toward ``gt``.
+
+    Event-only reconstructions have no absolute brightness or colour balance; EventNeRF (Rudnev et
+    al., CVPR 2023) reports metrics after such a fit. Both inputs ``[H, W, C]``; the result is
+    clipped to [0, 1].
+    """
+    p = np.asarray(pred, dtype=np.float64)
+    g = np.asarray(gt, dtype=np.float64)
+    _check_pair(p, g)
+    p2 = p.reshape(-1, p.shape[-1])
+    g2 = g.reshape(-1, g.shape[-1])
+    mp, mg = p2.mean(0), g2.mean(0)
+    var = ((p2 - mp) ** 2).mean(0)
+    cov = ((p2 - mp) * (g2 - mg)).mean(0)
+    a = np.where(var > 1e-12, cov / np.maximum(var, 1e-12), 0.0)
+    b = mg - a * mp
+    return np.clip(p * a + b, 0.0, 1.0)
+
+
+def image_metrics(pred: np.ndarray, gt: np.ndarray, *, affine: bool = False) -> dict[str, float]:
+    """``{"psnr", "ssim"}`` of one sRGB image pair, optionally after :func:`affine_fit`."""
+    if affine:
+        pred = affine_fit(pred, gt)
+    return {"psnr": psnr(pred, gt), "ssim": ssim(pred, gt)}
