@@ -14,7 +14,7 @@ import sys
 from fusiongs import __version__
 from fusiongs.errors import FusionGSError
 
-VERBS: tuple[str, ...] = ("demo",)
+VERBS: tuple[str, ...] = ("demo", "simulate", "convert", "inspect", "edi", "deblur", "render", "eval")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -34,7 +34,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:
+        # ``key=value`` config overrides may follow options; anything else is an error.
+        bad = [a for a in extra if "=" not in a or a.startswith("-")]
+        if bad or not hasattr(args, "overrides"):
+            parser.error(f"unrecognized arguments: {' '.join(bad or extra)}")
+        args.overrides = list(args.overrides or []) + extra
     if args.verb is None:
         parser.print_help()
         return 2

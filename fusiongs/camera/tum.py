@@ -42,25 +42,21 @@ def matrix_to_quat_xyzw(R: np.ndarray) -> np.ndarray:
     """Rotation matrices ``[..., 3, 3]`` to unit quaternions ``[..., 4]`` (x, y, z, w), w ≥ 0."""
     R = np.asarray(R, dtype=np.float64)
     m = R.reshape(-1, 3, 3)
-    out = np.empty((m.shape[0], 4))
-    tr = np.trace(m, axis1=1, axis2=2)
-    # Shepperd's method: choose the largest of w, x, y, z to divide by.
-    cands = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=1)
-    k = np.argmax(cands, axis=1)
-    for i in range(m.shape[0]):
-        a = m[i]
-        if k[i] == 0:
-            s = 2.0 * np.sqrt(max(1.0 + tr[i], 1e-300))
-            out[i] = [(a[2, 1] - a[1, 2]) / s, (a[0, 2] - a[2, 0]) / s, (a[1, 0] - a[0, 1]) / s, s / 4]
-        elif k[i] == 1:
-            s = 2.0 * np.sqrt(max(1.0 + a[0, 0] - a[1, 1] - a[2, 2], 1e-300))
-            out[i] = [s / 4, (a[0, 1] + a[1, 0]) / s, (a[0, 2] + a[2, 0]) / s, (a[2, 1] - a[1, 2]) / s]
-        elif k[i] == 2:
-            s = 2.0 * np.sqrt(max(1.0 + a[1, 1] - a[0, 0] - a[2, 2], 1e-300))
-            out[i] = [(a[0, 1] + a[1, 0]) / s, s / 4, (a[1, 2] + a[2, 1]) / s, (a[0, 2] - a[2, 0]) / s]
-        else:
-            s = 2.0 * np.sqrt(max(1.0 + a[2, 2] - a[0, 0] - a[1, 1], 1e-300))
-            out[i] = [(a[0, 2] + a[2, 0]) / s, (a[1, 2] + a[2, 1]) / s, s / 4, (a[1, 0] - a[0, 1]) / s]
+    m00, m01, m02 = m[:, 0, 0], m[:, 0, 1], m[:, 0, 2]
+    m10, m11, m12 = m[:, 1, 0], m[:, 1, 1], m[:, 1, 2]
+    m20, m21, m22 = m[:, 2, 0], m[:, 2, 1], m[:, 2, 2]
+    # Shepperd's method, loop-free: evaluate the four candidates (dividing by 4|w|, 4|x|, 4|y|,
+    # 4|z|) and keep the one whose divisor is largest.
+    diag = np.stack([m00 + m11 + m22, m00 - m11 - m22, m11 - m00 - m22, m22 - m00 - m11], axis=1)
+    s = 2.0 * np.sqrt(np.maximum(1.0 + diag, 1e-300))
+    s0, s1, s2, s3 = s.T
+    cands = np.stack([
+        np.stack([(m21 - m12) / s0, (m02 - m20) / s0, (m10 - m01) / s0, s0 / 4], axis=1),
+        np.stack([s1 / 4, (m01 + m10) / s1, (m02 + m20) / s1, (m21 - m12) / s1], axis=1),
+        np.stack([(m01 + m10) / s2, s2 / 4, (m12 + m21) / s2, (m02 - m20) / s2], axis=1),
+        np.stack([(m02 + m20) / s3, (m12 + m21) / s3, s3 / 4, (m10 - m01) / s3], axis=1),
+    ], axis=1)  # [n, 4 candidates, 4]
+    out = cands[np.arange(m.shape[0]), np.argmax(diag, axis=1)]
     out *= np.where(out[:, 3:4] < 0, -1.0, 1.0)
     return out.reshape(R.shape[:-2] + (4,))
 

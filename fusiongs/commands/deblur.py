@@ -1,0 +1,24 @@
+"""``fusiongs deblur SCENE -o OUT``: blurry frames + events -> sharp frames, video and 3DGS model."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "fit a 3DGS scene and trajectory to blurry frames and events; write sharp frames and video"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("scene", help="scene folder (scene.json; see FORMAT.md)")
+    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("--config", default=None,
+                   help="YAML config (default: built-in defaults = configs/deblur.yaml)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("overrides", nargs="*", metavar="key=value",
+                   help="config overrides, e.g. optim.iterations=500 events.loss=band")
+
+
+def run(args: argparse.Namespace) -> int:
+    from fusiongs.train.pipeline import run_deblur
+
+    run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume)
+    return 0

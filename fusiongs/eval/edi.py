@@ -1,0 +1,185 @@
+"""Event-based double integral (EDI): deblur a frame with its events (Pan et al., CVPR 2019).
+
+In linear light a blurry frame is the mean of the sharp images over its exposure ``[s, e]``, and
+events relate every instant to the mid-exposure image: ``L(t) = L(t_mid) exp(theta E(t))`` with
+``E(t)`` the signed event integral from ``t_mid`` to ``t``. Hence (Pan et al., Eq. 6)
+
+    ``L(t_mid) = B / mean_{t in [s, e]} exp(theta E(t))``
+
+with the mean taken at ``M`` instants ``t_k = s + (k + 0.5)/M (e - s)``. ``E`` uses the half-open
+convention of :meth:`EventStream.count_maps` (an event at ``t_e`` counts for ``t > t_e``), with
+``theta_+`` for ON and ``theta_-`` for OFF events: ``theta E = theta_+ dN_+ - theta_- dN_-``.
+
+Grey events scale every colour channel by the same ratio. Colour (CFA) events give each raw
+pixel the ratio of its own channel; the ratio map is demosaiced (bilinear, float) to three
+channels before dividing. An unknown threshold is estimated per frame from the events' edges
+(:func:`estimate_theta`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusiongs.errors import InputError
+from fusiongs.events.cfa import demosaic
+from fusiongs.events.stream import EventStream
+
+THETA_GRID = tuple(np.round(np.geomspace(0.05, 0.6, 23), 4))
+
+
+def _thetas(theta) -> tuple[float, float]:
+    if isinstance(theta, (tuple, list, np.ndarray)):
+        if len(theta) != 2:
+            raise InputError("edi", "theta", "a threshold or a (theta_pos, theta_neg) pair", theta)
+        tp, tn = float(theta[0]), float(theta[1])
+    else:
+        tp = tn = float(theta)
+    if not (np.isfinite(tp) and np.isfinite(tn) and tp > 0 and tn > 0):
+        raise InputError("edi", "theta", "positive contrast thresholds", (tp, tn))
+    return tp, tn
+
+
+def event_count_samples(events: EventStream, t_start: float, t_end: float, n_samples: int
+                        ) -> np.ndarray:
+    """ON/OFF event counts from mid-exposure to each sample instant.
+
+    Args:
+        events: time-sorted stream (µs).
+        t_start, t_end: exposure window in seconds.
+        n_samples: number of instants ``M``.
+
+    Returns:
+        ``[M, 2, H, W]`` int32 ``N_pm(t_k) - N_pm(t_mid)`` (channel 0 ON, 1 OFF): negative before
+        mid-exposure, positive after. One sort-free pass: a bincount over (sample bin, polarity,
+        pixel) and a cumulative sum over the bins.
+    """
+    if not (np.isfinite(t_start) and np.isfinite(t_end) and t_end > t_start):
+        raise InputError("edi", "t_start/t_end", "an exposure window with t_end > t_start",
+                         (t_start, t_end))
+    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 1:
+        raise InputError("edi", "n_samples", "a positive integer", n_samples)
+    s_us, e_us = t_start * 1e6, t_end * 1e6
+    ts = s_us + (np.arange(n_samples) + 0.5) / n_samples * (e_us - s_us)
+    mid = 0.5 * (s_us + e_us)
+    i0, i1 = events.index_range(int(np.floor(s_us)), int(np.ceil(e_us)) + 1)
+    t = events.t[i0:i1]
+    hw = events.height * events.width
+    pix = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
+    pix += (events.p[i0:i1] < 0) * hw
+    b = np.searchsorted(ts, t, side="right")  # the event counts for samples k >= b
+    hist = np.bincount(b * (2 * hw) + pix, minlength=(n_samples + 1) * 2 * hw)
+    cum = np.cumsum(hist.reshape(n_samples + 1, 2 * hw)[:n_samples], axis=0)
+    at_mid = np.bincount(pix[t < mid], minlength=2 * hw)
+    return (cum - at_mid).astype(np.int32).reshape(n_samples, 2, events.height, events.width)
+
+
+def edi_ratio(counts: np.ndarray, theta, cfa: str | None) -> np.ndarray:
+    """``mean_k exp(theta E(t_k))`` per pixel from :func:`event_count_samples` output.
+
+    Returns:
+        ``[H, W, 1]`` float64 for grey events, ``[H, W, 3]`` (bilinear-demosaiced) for a CFA.
+    """
+    tp, tn = _thetas(theta)
+    e = tp * counts[:, 0].astype(np.float64) - tn * counts[:, 1]
+    r = np.exp(e).mean(axis=0)
+    if cfa is None:
+        return r[..., None]
+    return np.asarray(demosaic(r, cfa, "bilinear"), dtype=np.float64)
+
+
+def _check_frame(frame: np.ndarray, events: EventStream) -> np.ndarray:
+    f = np.asarray(frame)
+    if f.ndim != 3 or f.shape[:2] != (events.height, events.width) or f.shape[2] not in (1, 3):
+        raise InputError("edi", "frame", f"a linear image [{events.height}, {events.width}, C], "
+                         "C = 1 or 3, matching the event sensor", f.shape)
+    if events.cfa is not None and f.shape[2] != 3:
+        raise InputError("edi", "frame", "an RGB frame for colour (CFA) events", f.shape)
+    return f.astype(np.float64)
+
+
+def _ncc(a: np.ndarray, b: np.ndarray) -> float:
+    a, b = a - a.mean(), b - b.mean()
+    den = np.sqrt((a * a).sum() * (b * b).sum())
+    return float((a * b).sum() / den) if den > 0 else 0.0
+
+
+def _event_edges(events: EventStream, t_start: float, t_end: float) -> np.ndarray:
+    """``[H, W]`` events per pixel in the middle eighth of the exposure (demosaiced for a CFA)."""
+    mid, half = 0.5e6 * (t_start + t_end), (t_end - t_start) * 1e6 / 16
+    cm = events.count_maps(int(np.floor(mid - half)), int(np.ceil(mid + half))).sum(0).astype(np.float64)
+    return cm if events.cfa is None else np.asarray(demosaic(cm, events.cfa, "bilinear")).mean(-1)
+
+
+def estimate_theta(frame_linear: np.ndarray, events: EventStream, t_start: float, t_end: float,
+                   n_samples: int = 32, grid=THETA_GRID) -> float:
+    """Threshold whose EDI result best agrees with the events at mid-exposure.
+
+    Events fire where ``|grad log L . v|`` is large, so the sharp mid-exposure image has its
+    log-gradient magnitude where the events of a short window around ``t_mid`` are. The estimate
+    maximises the normalised cross-correlation between ``|grad log L(theta)|`` (luminance) and the
+    event counts of the middle eighth of the exposure: the edge-consistency term of Pan et al.
+    (CVPR 2019, Sec. 4.3). Their total-variation term is left out: on thin structures narrower
+    than the blur it prefers residual blur (measured on the moving-bar test data).
+
+    Args:
+        frame_linear: ``[H, W, C]`` blurry frame, linear.
+        events, t_start, t_end, n_samples: as :func:`edi_deblur`.
+        grid: candidate thresholds (default 23 values geometrically spaced in [0.05, 0.6]).
+
+    Returns:
+        the best threshold of ``grid`` (one value for both polarities).
+    """
+    b = _check_frame(frame_linear, events)
+    counts = event_count_samples(events, t_start, t_end, n_samples)
+    edges = _event_edges(events, t_start, t_end)
+    eps = 1e-3 * max(float(b.mean()), 1e-12)
+    scores = []
+    for th in grid:  # a few candidate thresholds, each a vectorised image operation
+        lum = (b / edi_ratio(counts, th, events.cfa)).mean(axis=2)
+        gy, gx = np.gradient(np.log(np.maximum(lum, eps)))
+        scores.append(_ncc(np.hypot(gx, gy), edges))
+    return float(grid[int(np.argmax(scores))])
+
+
+def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_end: float,
+               theta=0.2, n_samples: int = 32) -> np.ndarray:
+    """Sharp mid-exposure image of one blurry frame (EDI, Pan et al., CVPR 2019).
+
+    Args:
+        frame_linear: ``[H, W, C]`` blurry frame in linear light (C = 1 or 3; 3 for CFA events).
+        events: time-sorted stream of the same sensor (µs clock = seconds x 1e6).
+        t_start, t_end: exposure window in seconds.
+        theta: contrast threshold, a ``(theta_pos, theta_neg)`` pair, or ``None`` to estimate it
+            with :func:`estimate_theta`.
+        n_samples: instants ``M`` the exposure mean is taken over.
+
+    Returns:
+        ``[H, W, C]`` float32 linear image at ``(t_start + t_end) / 2`` (not clipped).
+    """
+    b = _check_frame(frame_linear, events)
+    if theta is None:
+        theta = estimate_theta(frame_linear, events, t_start, t_end, n_samples)
+    counts = event_count_samples(events, t_start, t_end, n_samples)
+    return (b / edi_ratio(counts, theta, events.cfa)).astype(np.float32)
+
+
+def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
+    """EDI-deblur every frame of a :class:`~fusiongs.io.scene.Scene`.
+
+    Args:
+        scene: a scene with events and frames.
+        theta: threshold, polarity pair, or ``None`` to estimate one per frame.
+        n_samples: instants per exposure.
+
+    Returns:
+        ``[F, H, W, C]`` float32 linear images at the frames' mid-exposure times.
+    """
+    if scene.events is None:
+        raise InputError("edi", "events", "a scene with an event stream", "none")
+    fs = scene.frames
+    if len(fs) == 0:
+        raise InputError("edi", "frames", "a scene with at least one frame", "none")
+    lin = fs.to_linear()
+    out = [edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), theta,
+                      n_samples) for i in range(len(fs))]  # loop over frames, not pixels
+    return np.stack(out)

@@ -1,0 +1,132 @@
+"""The run report: metrics tables, loss curves and picture strips drawn with OpenCV into one PNG."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import cv2
+import numpy as np
+
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+_COLOURS = [(31, 119, 180), (255, 127, 14), (44, 160, 44), (214, 39, 40), (148, 103, 189),
+            (140, 86, 75)]  # RGB
+
+
+def _to_u8(img: np.ndarray) -> np.ndarray:
+    a = np.asarray(img, dtype=np.float64)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.shape[-1] == 1:
+        a = np.repeat(a, 3, axis=-1)
+    return np.round(np.clip(a, 0, 1) * 255).astype(np.uint8)
+
+
+def _label(img: np.ndarray, text: str, scale: float = 0.4) -> np.ndarray:
+    """Put ``text`` on a white band above an RGB uint8 image."""
+    band = np.full((16, img.shape[1], 3), 255, np.uint8)
+    cv2.putText(band, text[: max(1, img.shape[1] // 7)], (2, 12), _FONT, scale, (0, 0, 0), 1,
+                cv2.LINE_AA)
+    return np.concatenate([band, img], axis=0)
+
+
+def picture_strip(columns: Mapping[str, np.ndarray]) -> np.ndarray:
+    """Images ``[H, W, C]`` in [0, 1] side by side, each under its name; RGB uint8."""
+    tiles = [_label(_to_u8(img), name) for name, img in columns.items()]
+    h = max(t.shape[0] for t in tiles)
+    tiles = [np.pad(t, ((0, h - t.shape[0]), (0, 4), (0, 0)), constant_values=255) for t in tiles]
+    return np.concatenate(tiles, axis=1)
+
+
+def line_plot(series: Mapping[str, Sequence[tuple[float, float]]], title: str,
+              size: tuple[int, int] = (360, 220), log_y: bool = False) -> np.ndarray:
+    """A small line plot of named ``(x, y)`` series; RGB uint8 ``[h, w, 3]``."""
+    w, h = size
+    img = np.full((h, w, 3), 255, np.uint8)
+    left, right, top, bottom = 48, 8, 20, 22
+    cv2.putText(img, title, (left, 14), _FONT, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    pts = {k: np.asarray(v, dtype=np.float64).reshape(-1, 2) for k, v in series.items() if len(v)}
+    if not pts:
+        return img
+    allp = np.concatenate(list(pts.values()))
+    ys = allp[:, 1]
+    if log_y:
+        ys = np.log10(np.maximum(ys, 1e-12))
+    finite = np.isfinite(ys)
+    if not finite.any():
+        return img
+    x0, x1 = allp[:, 0].min(), allp[:, 0].max()
+    y0, y1 = ys[finite].min(), ys[finite].max()
+    x1 = x1 if x1 > x0 else x0 + 1
+    y1 = y1 if y1 > y0 else y0 + 1e-6
+    cv2.rectangle(img, (left, top), (w - right, h - bottom), (160, 160, 160), 1)
+    for frac in (0.0, 1.0):
+        yv = y0 + frac * (y1 - y0)
+        txt = f"{10 ** yv:.2g}" if log_y else f"{yv:.3g}"
+        yy = int(h - bottom - frac * (h - top - bottom))
+        cv2.putText(img, txt, (2, yy + 4), _FONT, 0.3, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(img, f"{x0:.0f}", (left, h - 6), _FONT, 0.3, (0, 0, 0), 1, cv2.LINE_AA)
+    cv2.putText(img, f"{x1:.0f}", (w - right - 30, h - 6), _FONT, 0.3, (0, 0, 0), 1, cv2.LINE_AA)
+    for i, (name, p) in enumerate(pts.items()):
+        y = np.log10(np.maximum(p[:, 1], 1e-12)) if log_y else p[:, 1]
+        ok = np.isfinite(y)
+        px = left + (p[ok, 0] - x0) / (x1 - x0) * (w - left - right)
+        py = h - bottom - (y[ok] - y0) / (y1 - y0) * (h - top - bottom)
+        colour = _COLOURS[i % len(_COLOURS)]
+        poly = np.stack([px, py], axis=1).round().astype(np.int32)
+        cv2.polylines(img, [poly], False, colour, 1, cv2.LINE_AA)
+        cv2.putText(img, name, (left + 4 + 70 * i, top + 12), _FONT, 0.3, colour, 1, cv2.LINE_AA)
+    return img
+
+
+def table_image(rows: Sequence[Sequence[str]], width: int) -> np.ndarray:
+    """A plain text table, one line per row; RGB uint8."""
+    h = 14 * len(rows) + 6
+    img = np.full((h, width, 3), 255, np.uint8)
+    for i, row in enumerate(rows):
+        line = "".join(f"{cell:<16}" for cell in row)
+        cv2.putText(img, line, (4, 14 * (i + 1)), cv2.FONT_HERSHEY_PLAIN, 0.9, (0, 0, 0), 1,
+                    cv2.LINE_AA)
+    return img
+
+
+def stack_rows(parts: Sequence[np.ndarray]) -> np.ndarray:
+    """Stack RGB uint8 images vertically, padding to the widest."""
+    w = max(p.shape[1] for p in parts)
+    padded = [np.pad(p, ((0, 4), (0, w - p.shape[1]), (0, 0)), constant_values=255) for p in parts]
+    return np.concatenate(padded, axis=0)
+
+
+def side_by_side(parts: Sequence[np.ndarray]) -> np.ndarray:
+    """Place RGB uint8 images left to right, padding to the tallest."""
+    h = max(p.shape[0] for p in parts)
+    padded = [np.pad(p, ((0, h - p.shape[0]), (0, 4), (0, 0)), constant_values=255) for p in parts]
+    return np.concatenate(padded, axis=1)
+
+
+def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[str, np.ndarray]],
+                 gt: Mapping[str, np.ndarray], max_strips: int = 4) -> None:
+    """``report.png``: mean table, loss / θ curves and picture strips (methods | truth)."""
+    from fusiongs.frames.image_io import write_png
+
+    rows = [["views", "method", "n", "PSNR", "SSIM"]]
+    for g, by in result["mean"].items():
+        for method, m in by.items():
+            rows.append([g, method, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
+    its = history.iteration
+    loss = line_plot({"loss": list(zip(its, history.loss))}, "loss", log_y=True)
+    th = {}
+    if history.theta_pos:
+        tp, tn = np.asarray(history.theta_pos), np.asarray(history.theta_neg)
+        for c in range(tp.shape[1]):
+            th[f"theta+{c}"] = list(zip(its, tp[:, c]))
+            th[f"theta-{c}"] = list(zip(its, tn[:, c]))
+    theta = line_plot(th, "contrast threshold")
+    views = [n for n in sorted(gt) if n.startswith("deblur_")][:max_strips]
+    views += [n for n in sorted(gt) if n.startswith("novel_")][: max(1, max_strips // 2)]
+    strips = []
+    for name in views:
+        cols = {f"{m} {name}": imgs[name] for m, imgs in methods.items() if name in imgs}
+        cols["truth"] = gt[name]
+        strips.append(picture_strip(cols))
+    parts = [table_image(rows, 520), side_by_side([loss, theta])] + strips
+    write_png(path, stack_rows(parts).astype(np.float32) / 255.0)

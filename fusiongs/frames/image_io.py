@@ -1,0 +1,185 @@
+"""Frame files: 8/16-bit PNG and JPEG through OpenCV, camera raw files through rawpy."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from fusiongs.errors import InputError, MissingDependencyError
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+
+
+def is_raw_path(path: str | Path) -> bool:
+    """True when ``path`` is not an ordinary image file name (then it is opened with rawpy)."""
+    return Path(path).suffix.lower() not in IMAGE_SUFFIXES
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """Read an 8- or 16-bit PNG/JPEG (or TIFF/BMP) image.
+
+    Args:
+        path: image file.
+
+    Returns:
+        ``[H, W, C]`` float32 in [0, 1], stored values divided by 255 or 65535; C = 3 (RGB order)
+        or 1 (grey).
+
+    Raises:
+        InputError: unreadable file, an alpha channel, or a bit depth other than 8/16.
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "image", "an existing image file", "no such file")
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise InputError(path, "image", "a PNG or JPEG file OpenCV can decode", "undecodable")
+    if img.dtype == np.uint8:
+        scale = 255.0
+    elif img.dtype == np.uint16:
+        scale = 65535.0
+    else:
+        raise InputError(path, "image", "8- or 16-bit samples", str(img.dtype))
+    if img.ndim == 2:
+        img = img[:, :, None]
+    elif img.shape[2] == 3:
+        img = img[:, :, ::-1]
+    elif img.shape[2] != 1:
+        raise InputError(path, "image", "1 (grey) or 3 (RGB) channels", f"{img.shape[2]} channels")
+    return (img.astype(np.float32) / np.float32(scale)).copy()
+
+
+def write_png(path: str | Path, img: np.ndarray, bits: int = 8) -> None:
+    """Write ``[H, W, C]`` (C = 1 or 3, RGB) or ``[H, W]`` values in [0, 1] as a PNG, atomically.
+
+    Values are clipped to [0, 1] and rounded to ``bits`` (8 or 16). The file is written next to
+    its destination under a temporary name and then renamed, so readers never see half a file.
+    """
+    import cv2
+
+    path = Path(path)
+    if bits not in (8, 16):
+        raise InputError(path, "bits", "8 or 16", bits)
+    a = np.asarray(img, dtype=np.float64)
+    if a.ndim == 3 and a.shape[2] == 1:
+        a = a[:, :, 0]
+    if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)):
+        raise InputError(path, "image", "an array [H, W], [H, W, 1] or [H, W, 3]", a.shape)
+    top = 255 if bits == 8 else 65535
+    q = np.rint(np.clip(np.nan_to_num(a), 0.0, 1.0) * top).astype(np.uint8 if bits == 8 else np.uint16)
+    if q.ndim == 3:
+        q = np.ascontiguousarray(q[:, :, ::-1])
+    ok, buf = cv2.imencode(".png", q)
+    if not ok:
+        raise InputError(path, "image", "an image OpenCV can encode as PNG", q.shape)
+    atomic_write_bytes(path, buf.tobytes())
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _open_raw(path: Path):
+    try:
+        import rawpy
+    except ImportError:  # pragma: no cover - rawpy is a dependency
+        raise MissingDependencyError("rawpy", "reading raw frames") from None
+    if not path.is_file():
+        raise InputError(path, "raw", "an existing raw file", "no such file")
+    try:
+        return rawpy.imread(str(path))
+    except Exception as e:  # rawpy raises LibRawError subclasses and others
+        raise InputError(path, "raw", "a raw file rawpy can open", type(e).__name__) from None
+
+
+def read_raw_mosaic(path: str | Path) -> tuple[np.ndarray, str]:
+    """Read a Bayer raw file's visible mosaic, normalised to [0, 1].
+
+    ``(raw - black[channel]) / (white - black[channel])`` per pixel with the per-channel black
+    levels and the white level from the file, clipped to [0, 1] (sensor saturation).
+
+    Returns:
+        ``([H, W] float32 linear mosaic, pattern)`` with ``pattern`` one of ``"RGGB"``, ``"BGGR"``,
+        ``"GRBG"``, ``"GBRG"``, derived from rawpy's per-pixel colours and ``color_desc``.
+
+    Raises:
+        InputError: unreadable file or a non-Bayer sensor (X-Trans, four-colour, Foveon, linear).
+    """
+    path = Path(path)
+    with _open_raw(path) as r:
+        if r.raw_pattern is None or r.num_colors != 3:
+            raise InputError(path, "raw", "a 2x2 Bayer sensor with three colours",
+                             f"num_colors={r.num_colors}")
+        # copies: rawpy's arrays are views of LibRaw memory freed when the file is closed
+        raw = np.array(r.raw_image_visible, copy=True)
+        colors = np.array(r.raw_colors_visible, copy=True)
+        desc = r.color_desc.decode("ascii", "replace")
+        black = np.asarray(r.black_level_per_channel, dtype=np.float64)
+        white = float(r.white_level)
+    if raw.ndim != 2 or raw.shape[0] < 2 or raw.shape[1] < 2:
+        raise InputError(path, "raw", "a 2-D mosaic of at least 2x2", raw.shape)
+    cell = colors[:2, :2]
+    h, w = colors.shape
+    tiled = np.tile(cell, ((h + 1) // 2, (w + 1) // 2))[:h, :w]
+    try:
+        pattern = "".join(desc[c] for c in cell.ravel())
+    except IndexError:
+        pattern = "?"
+    if not np.array_equal(tiled, colors) or pattern not in ("RGGB", "BGGR", "GRBG", "GBRG"):
+        raise InputError(path, "raw", "a 2x2 Bayer pattern of R, G, B", f"{pattern!r} ({desc})")
+    blk = black[colors]
+    out = (raw.astype(np.float64) - blk) / np.maximum(white - blk, 1.0)
+    return np.clip(out, 0.0, 1.0).astype(np.float32), pattern
+
+
+def read_raw(path: str | Path, *, demosaic: str | None = "opencv-ea", white_balance: bool = False,
+             color_matrix: bool = False) -> np.ndarray | tuple[np.ndarray, str]:
+    """Read a camera raw file as linear data.
+
+    Args:
+        path: raw file (anything LibRaw opens with a 2x2 Bayer sensor).
+        demosaic: a :func:`fusiongs.events.cfa.demosaic` method (``"opencv-ea"``,
+            ``"opencv-bilinear"``, ``"kornia"``, ...), or ``None`` for the mosaic itself.
+        white_balance: multiply by the camera's as-shot white balance (normalised to green).
+        color_matrix: apply the file's camera-RGB -> sRGB-primaries matrix (``rawpy.color_matrix``);
+            an InputError when the file has none. Without it colours stay in camera RGB.
+
+    Returns:
+        ``[H, W, 3]`` float32 linear RGB (not clipped after the colour steps) when ``demosaic`` is
+        given; else ``(mosaic [H, W] float32 in [0, 1], pattern)`` as :func:`read_raw_mosaic`.
+    """
+    from fusiongs.events.cfa import demosaic as _demosaic
+
+    path = Path(path)
+    mos, pattern = read_raw_mosaic(path)
+    if demosaic is None:
+        return mos, pattern
+    rgb = np.asarray(_demosaic(mos, pattern, demosaic), dtype=np.float32)
+    if white_balance or color_matrix:
+        with _open_raw(path) as r:
+            wb = np.asarray(r.camera_whitebalance[:3], dtype=np.float64)
+            cm = np.asarray(r.color_matrix, dtype=np.float64)[:3, :3]
+        if white_balance:
+            if not (np.all(np.isfinite(wb)) and np.all(wb > 0)):
+                raise InputError(path, "camera_whitebalance", "positive multipliers", wb.tolist())
+            rgb = rgb * (wb / wb[1]).astype(np.float32)
+        if color_matrix:
+            if not np.any(cm):
+                raise InputError(path, "color_matrix", "a camera-to-sRGB matrix in the file", "zeros")
+            rgb = (rgb @ cm.T.astype(np.float32)).astype(np.float32)
+    return rgb

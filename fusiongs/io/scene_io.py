@@ -1,0 +1,179 @@
+"""Read and write the native scene folder (FORMAT.md, version 1).
+
+``load_scene`` validates ``scene.json`` (:mod:`fusiongs.io.scene_json`), then every file it names:
+the event stream (``fusiongs.events.h5``), each frame (8/16-bit PNG/JPEG, or a raw file through
+rawpy), and the trajectory (TUM). Every error is an :class:`~fusiongs.errors.InputError` naming the
+file and the key path.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from fusiongs.errors import InputError
+from fusiongs.frames.frameset import FrameSet
+from fusiongs.frames.image_io import is_raw_path, read_image, read_raw, write_png
+from fusiongs.frames.response import linear_to_response
+from fusiongs.io.scene import Scene
+from fusiongs.io.scene_json import FrameEntry, SceneSpec, parse_scene_dict, scene_spec_to_dict
+
+SCENE_FILE = "scene.json"
+
+
+def scene_json_path(path: str | Path) -> Path:
+    """``path/scene.json`` for a folder, or ``path`` itself when it names a file."""
+    path = Path(path)
+    return path / SCENE_FILE if path.is_dir() else path
+
+
+def read_scene_spec(path: str | Path) -> SceneSpec:
+    """Read and validate ``scene.json`` only (no other file is opened)."""
+    jp = scene_json_path(path)
+    try:
+        text = jp.read_text(encoding="utf-8")
+    except OSError as e:
+        raise InputError(jp, SCENE_FILE, "a readable scene.json (or a folder holding one)",
+                         e.strerror) from None
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise InputError(jp, f"line {e.lineno} column {e.colno}", "valid JSON", e.msg) from None
+    return parse_scene_dict(doc, str(jp))
+
+
+def _resolve(root: Path, rel: str) -> Path:
+    p = Path(rel)
+    return p if p.is_absolute() else root / p
+
+
+def _frame_names(entries: tuple[FrameEntry, ...]) -> tuple[str, ...]:
+    stems = [Path(f.path).stem for f in entries]
+    if len(set(stems)) == len(stems):
+        return tuple(stems)
+    return tuple(f"{i:06d}_{s}" for i, s in enumerate(stems))
+
+
+def _load_frames(spec: SceneSpec, root: Path, where: str) -> FrameSet:
+    cam = spec.camera
+    if not spec.frames:
+        return FrameSet.empty(cam.height, cam.width, 3, spec.frame_response)
+    images = []
+    for i, f in enumerate(spec.frames):
+        key = f"frames[{i}].path"
+        p = _resolve(root, f.path)
+        if not p.is_file():
+            raise InputError(where, key, "an existing image file", str(p))
+        if is_raw_path(p):
+            # Raw frames are linear; they are stored encoded like the other frames.
+            lin = np.clip(read_raw(p, demosaic="opencv-ea"), 0.0, 1.0)
+            img = np.asarray(linear_to_response(lin, spec.frame_response), dtype=np.float32)
+        else:
+            img = read_image(p)
+        if img.shape[:2] != (cam.height, cam.width):
+            raise InputError(p, key, f"an image of the camera size {cam.width}x{cam.height}",
+                             f"{img.shape[1]}x{img.shape[0]}")
+        if images and img.shape[2] != images[0].shape[2]:
+            raise InputError(p, key, f"{images[0].shape[2]} channel(s) like frames[0]",
+                             f"{img.shape[2]} channel(s)")
+        images.append(img)
+    return FrameSet(np.stack(images), np.array([f.t_start for f in spec.frames]),
+                    np.array([f.t_end for f in spec.frames]), _frame_names(spec.frames),
+                    spec.frame_response)
+
+
+def load_scene(path: str | Path, *, sort_events: bool = False, drop_invalid_events: bool = False,
+               load_events: bool = True) -> Scene:
+    """Load a scene folder.
+
+    Args:
+        path: the scene folder, or its ``scene.json``.
+        sort_events: stably sort unsorted event timestamps instead of raising.
+        drop_invalid_events: drop events outside the sensor instead of raising.
+        load_events: ``False`` skips reading the event file (``Scene.events`` is then ``None``;
+            the file must still exist).
+
+    Returns:
+        the :class:`Scene`, ``root`` set to the folder holding ``scene.json``.
+
+    Raises:
+        InputError: naming ``scene.json`` or the faulty frame / events / trajectory file and the
+            key path (``frames[3].path``, ``events.path``, ``trajectory``, ...).
+    """
+    jp = scene_json_path(path)
+    spec = read_scene_spec(jp)
+    root, where = jp.parent, str(jp)
+    events = None
+    if spec.events_path is not None:
+        ep = _resolve(root, spec.events_path)
+        if not ep.is_file():
+            raise InputError(where, "events.path", "an existing HDF5 event file", str(ep))
+        if load_events:
+            from fusiongs.events.h5 import read_events_h5
+
+            events = read_events_h5(ep, spec.camera.width, spec.camera.height, spec.cfa,
+                                    sort=sort_events, drop_invalid=drop_invalid_events)
+    frames = _load_frames(spec, root, where)
+    poses = None
+    if spec.trajectory is not None:
+        tp = _resolve(root, spec.trajectory)
+        if not tp.is_file():
+            raise InputError(where, "trajectory", "an existing TUM trajectory file", str(tp))
+        from fusiongs.camera.tum import read_tum
+
+        poses = read_tum(tp)
+    return Scene(spec.camera, events, frames, poses, spec.renders, root)
+
+
+def save_scene(scene: Scene, path: str | Path, *, images_bits: int = 8) -> Path:
+    """Write ``scene`` as a scene folder: ``scene.json``, ``events.h5``, ``frames/<name>.png``,
+    ``trajectory.txt`` (each written atomically).
+
+    Frames are written as stored (``FrameSet.images`` already encoded by its response), rounded
+    to ``images_bits`` (8 or 16). The event CFA is taken from ``scene.events.cfa``.
+
+    Returns:
+        the path of the written ``scene.json``.
+
+    Raises:
+        InputError: duplicate frame names, a frame or event size that differs from the camera.
+    """
+    from fusiongs.io.atomic import write_text
+
+    root = Path(path)
+    root.mkdir(parents=True, exist_ok=True)
+    cam, fs = scene.camera, scene.frames
+    if scene.events is None and len(fs) == 0:
+        raise InputError("save_scene", "events/frames", "an event stream or at least one frame", "neither")
+    if len(set(fs.names)) != len(fs.names):
+        raise InputError("save_scene", "frames.names", "unique frame names", list(fs.names))
+    if len(fs) and fs.images.shape[1:3] != (cam.height, cam.width):
+        raise InputError("save_scene", "frames.images", f"images of the camera size {cam.width}x"
+                         f"{cam.height}", f"{fs.images.shape[2]}x{fs.images.shape[1]}")
+    entries = []
+    for i, name in enumerate(fs.names):
+        rel = f"frames/{name}.png"
+        write_png(root / rel, fs.images[i], bits=images_bits)
+        entries.append(FrameEntry(rel, float(fs.t_start[i]), float(fs.t_end[i])))
+    events_path, cfa = None, None
+    if scene.events is not None:
+        ev = scene.events
+        if (ev.width, ev.height) != (cam.width, cam.height):
+            raise InputError("save_scene", "events", f"a {cam.width}x{cam.height} sensor",
+                             f"{ev.width}x{ev.height}")
+        from fusiongs.events.h5 import write_events_h5
+
+        events_path, cfa = "events.h5", ev.cfa
+        write_events_h5(ev, root / events_path)
+    traj = None
+    if scene.poses is not None:
+        from fusiongs.camera.tum import write_tum
+
+        traj = "trajectory.txt"
+        write_tum(root / traj, scene.poses)
+    spec = SceneSpec(cam, events_path, cfa, tuple(entries), fs.response, traj, tuple(scene.renders))
+    jp = root / SCENE_FILE
+    write_text(jp, json.dumps(scene_spec_to_dict(spec), indent=2) + "\n")
+    return jp

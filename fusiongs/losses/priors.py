@@ -1,0 +1,77 @@
+"""Optional image priors: EDI-deblurred frames and HPF intensity images (METHOD.md section 3).
+
+- EDI prior: the mid-exposure render should look like the EDI-deblurred frame (Pan et al., CVPR
+  2019), used early in training (as DiET-GS and E2NeRF use event-deblurred images).
+- Intensity prior ``l_i`` of Event-3DGS (Han et al., NeurIPS 2024) for event-only mode: an L1 to an
+  intensity image reconstructed from the events by the high-pass filter (Scheerlinck et al., ACCV
+  2018). Such an image is a *log* image known only up to an offset per channel (the integration
+  constant; equivalently an unknown gain in linear light), so the loss compares log renders with it
+  after fitting that offset.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from fusiongs.errors import InputError
+from fusiongs.losses.blur import apply_response
+
+
+def _check_pair(where: str, a: torch.Tensor, b: torch.Tensor) -> None:
+    if a.shape != b.shape or a.ndim < 3:
+        raise InputError(where, "render/target", "equal shapes [..., H, W, C]",
+                         f"{tuple(a.shape)} and {tuple(b.shape)}")
+
+
+def edi_prior_loss(
+    render_mid: torch.Tensor,
+    edi_image: torch.Tensor,
+    response: str = "srgb",
+    valid: torch.Tensor | None = None,
+) -> torch.Tensor:
+    """L1 between the mid-exposure render and the EDI-deblurred frame, in an encoded space.
+
+    Both inputs are linear; both are encoded with ``response`` (sRGB by default, the space of the
+    blur loss, so dark regions are not drowned by bright ones) before the L1. Pass
+    ``response="linear"`` for an L1 in linear light.
+
+    Args:
+        render_mid: ``[..., H, W, C]`` linear render at mid-exposure.
+        edi_image: ``[..., H, W, C]`` linear EDI estimate of the same frame (no gradient needed).
+        response: encoding applied to both before the L1.
+        valid: optional ``[..., H, W, C]`` (or broadcastable) bool mask of usable EDI pixels.
+
+    Returns:
+        Scalar mean absolute difference over (valid) pixels.
+    """
+    _check_pair("edi_prior_loss", render_mid, edi_image)
+    diff = (apply_response(render_mid, response) - apply_response(edi_image, response)).abs()
+    if valid is None:
+        return diff.mean()
+    m = valid.to(diff.dtype).expand_as(diff)
+    return (diff * m).sum() / m.sum().clamp(min=1.0)
+
+
+def intensity_prior_loss(
+    render: torch.Tensor, hpf_log_image: torch.Tensor, eps: float = 1e-3
+) -> torch.Tensor:
+    """Event-3DGS intensity loss ``l_i``: L1 in log space up to a fitted per-channel offset.
+
+    ``mean |log(L + eps) + b_c - J|`` where ``J`` is the HPF log image and ``b_c`` the per-image,
+    per-channel median of ``J - log(L + eps)``, the offset minimising the L1 (held without
+    gradient: at the minimum the loss is flat in ``b_c``).
+
+    Args:
+        render: ``[..., H, W, C]`` linear render at the image's time.
+        hpf_log_image: ``[..., H, W, C]`` HPF intensity image in natural-log units (any offset).
+        eps: log offset, as in the event losses.
+
+    Returns:
+        Scalar loss in log units.
+    """
+    _check_pair("intensity_prior_loss", render, hpf_log_image)
+    log_r = torch.log(render + eps)
+    resid = hpf_log_image - log_r
+    flat = resid.detach().flatten(-3, -2)  # [..., H*W, C]
+    offset = flat.median(dim=-2).values[..., None, None, :]  # [..., 1, 1, C]
+    return (log_r + offset - hpf_log_image).abs().mean()

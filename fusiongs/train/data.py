@@ -1,0 +1,95 @@
+"""Training tensors prepared once from a :class:`~fusiongs.io.scene.Scene`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.errors import InputError
+from fusiongs.events.stream import EventStream
+from fusiongs.io.scene import Scene
+from fusiongs.losses.colour import cfa_index
+
+
+@dataclass(eq=False)
+class TrainData:
+    """What the training step reads.
+
+    Attributes:
+        camera: the shared pinhole camera.
+        targets: ``[F, H, W, C]`` float32 frames as stored (encoded by ``response``), C = 1 or 3.
+        response: the frames' response curve name.
+        exposures: ``[F, 2]`` float64 exposure windows (s).
+        names: frame stems.
+        events: the event stream or None.
+        cfa_index: ``[H, W]`` int64 CFA channel per pixel (0 R, 1 G, 2 B) for colour events.
+        t_range: ``(t0, t1)`` seconds where both events (if any) and the trajectory are defined.
+        frame_interval: median spacing of frame mid-times (s), or the range when < 2 frames.
+    """
+
+    camera: PinholeCamera
+    targets: torch.Tensor
+    response: str
+    exposures: torch.Tensor
+    names: tuple[str, ...]
+    events: EventStream | None
+    cfa_index: torch.Tensor | None
+    t_range: tuple[float, float]
+    frame_interval: float
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.targets.shape[0])
+
+    def count_maps(self, t_a: float, t_b: float, device: torch.device) -> torch.Tensor:
+        """``[2, H, W]`` float32 counts of (+, −) events with ``t_a <= t < t_b`` (seconds)."""
+        assert self.events is not None
+        c = self.events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
+        return torch.from_numpy(np.ascontiguousarray(c)).to(device=device, dtype=torch.float32)
+
+
+def prepare_data(scene: Scene, device: torch.device, use_events: bool) -> TrainData:
+    """Convert a scene into training tensors and check that it can be trained on.
+
+    Raises:
+        InputError: no trajectory (pose estimation is not part of this path yet), neither frames nor
+            events, or exposures outside the trajectory's time range.
+    """
+    where = str(scene.root / "scene.json") if scene.root else "scene"
+    if scene.poses is None:
+        raise InputError(where, "trajectory", "a trajectory file (pose estimation from frames is "
+                         "not available in this version)", "none")
+    frames = scene.frames
+    events = scene.events if use_events else None
+    if events is not None and len(events) == 0:
+        events = None
+    if len(frames) == 0 and events is None:
+        raise InputError(where, "frames/events", "at least one frame or a non-empty event stream")
+    t_lo, t_hi = float(scene.poses.t[0]), float(scene.poses.t[-1])
+    if events is not None:
+        t_lo, t_hi = max(t_lo, events.t[0] * 1e-6), min(t_hi, events.t[-1] * 1e-6)
+    exposures = np.stack([frames.t_start, frames.t_end], axis=1) if len(frames) else np.zeros((0, 2))
+    if len(frames):
+        bad = np.flatnonzero((exposures[:, 0] < scene.poses.t[0]) | (exposures[:, 1] > scene.poses.t[-1]))
+        if bad.size:
+            raise InputError(where, f"frames[{bad[0]}]", "an exposure inside the trajectory's time range "
+                             f"[{scene.poses.t[0]}, {scene.poses.t[-1]}] s", exposures[bad[0]].tolist())
+    mids = exposures.mean(axis=1) if len(frames) else np.zeros(0)
+    interval = float(np.median(np.diff(mids))) if mids.size >= 2 else max(t_hi - t_lo, 1e-3)
+    cfa = None
+    if events is not None and events.cfa is not None:
+        cfa = cfa_index(events.cfa, scene.camera.height, scene.camera.width, device=device)
+    return TrainData(
+        camera=scene.camera,
+        targets=torch.from_numpy(np.ascontiguousarray(frames.images, dtype=np.float32)).to(device),
+        response=frames.response,
+        exposures=torch.from_numpy(exposures.astype(np.float64)),
+        names=tuple(frames.names),
+        events=events,
+        cfa_index=cfa,
+        t_range=(t_lo, t_hi),
+        frame_interval=interval,
+    )

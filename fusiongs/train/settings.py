@@ -1,0 +1,105 @@
+"""Settings of ``fusiongs deblur``: nested dataclasses loaded from ``configs/*.yaml``.
+
+Field comments are the documentation of every key; defaults follow ../shared/METHOD.md.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+
+@dataclass
+class InitSettings:
+    n_points: int = 20000            # random Gaussians in the camera frusta
+    depth_min: float = 1.0           # near bound of the sampled depths (scene units)
+    depth_max: float = 6.0           # far bound of the sampled depths (scene units)
+    opacity: float = 0.1             # initial opacity
+    sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
+
+
+@dataclass
+class BlurSettings:
+    n_samples: int = 9               # N sharp renders inside each exposure (odd: middle = mid-exposure)
+    ssim_lambda: float = 0.2         # λ in (1-λ)·L1 + λ·(1-SSIM)
+    weight: float = 1.0              # weight of the blur loss
+    learn_gain: bool = False         # learnable per-frame exposure gain g_i
+
+
+@dataclass
+class EventSettings:
+    enabled: bool = True             # use the event loss at all
+    loss: Literal["mse", "band", "pvc"] = "mse"
+    beta: float = 0.0                # tolerance of the band loss (count units): 0 synthetic, 0.5 real
+    weight: float = 0.1              # λ_ev after the warm-up
+    warmup: int = 1000               # iterations with λ_ev = 0 and θ frozen
+    ramp: int = 0                    # iterations of linear ramp of λ_ev after the warm-up
+    pixels: int = 8192               # P sampled pixels per window
+    frac_with_events: float = 0.9    # share of sampled pixels that saw events in the window
+    windows_inside: int = 1          # windows between pairs of the N in-exposure instants
+    windows_free: int = 1            # windows of log-uniform length anywhere in the stream
+    min_window: float = 0.001        # shortest free window (s)
+    colour_mode: Literal["mask", "demosaic"] = "mask"
+    channel_weights: tuple[float, float, float] = (0.4, 0.2, 0.4)
+    grey_weights: tuple[float, float, float] = (0.299, 0.587, 0.114)
+    log_eps: float = 1e-3            # ε in log(I + ε), in units of the linear radiance range
+    hpf_tau: float = 0.05            # τ of the high-pass filter for the pvc target (s)
+
+
+@dataclass
+class ThresholdSettings:
+    init: float = 0.22               # initial θ for both polarities
+    learn: bool = True               # learn θ after the warm-up
+    lr: float = 0.01                 # Adam learning rate of log θ
+    regularise: float = 0.0          # weight of the pull toward the initial θ (event-only mode)
+
+
+@dataclass
+class OptimSettings:
+    iterations: int = 3000
+    lr_means: float = 1.6e-4         # times the scene extent
+    lr_means_final: float = 1.6e-6   # exponential decay to this (times the scene extent)
+    lr_scales: float = 5e-3
+    lr_quats: float = 1e-3
+    lr_opacities: float = 5e-2
+    lr_colors: float = 2.5e-3
+    lr_gain: float = 1e-3
+    refine_poses: bool = True        # refine the trajectory knots jointly
+    lr_pose: float = 1e-3            # camera learning rate, decayed to lr_pose_final
+    lr_pose_final: float = 1e-5
+    pose_start: int = 500            # iteration from which poses are refined
+
+
+@dataclass
+class DensifySettings:
+    enabled: bool = True
+    start: int = 300
+    stop: int = 2000
+    every: int = 100
+    grad_threshold: float = 2e-4     # view-space gradient threshold (divided over the N renders)
+    reset_opacity_every: int = 3000  # 0 disables; also disabled once events are on
+    max_gaussians: int = 200000
+
+
+@dataclass
+class OutputSettings:
+    progress: bool = True            # progress bar with loss and PSNR
+    eval_every: int = 250            # iterations between PSNR read-outs (deblur views)
+    video_fps: int = 12
+    checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
+
+
+@dataclass
+class DeblurConfig:
+    seed: int = 0
+    backend: Literal["auto", "torch", "cpu", "gsplat"] = "auto"
+    device: str = "cpu"              # torch device string for training, e.g. "cpu" or "cuda:0"
+    trajectory: Literal["linear", "spline"] = "spline"
+    knot_spacing: float = 0.02       # spline knot spacing (s); 0 = the pose samples' spacing
+    init: InitSettings = field(default_factory=InitSettings)
+    blur: BlurSettings = field(default_factory=BlurSettings)
+    events: EventSettings = field(default_factory=EventSettings)
+    threshold: ThresholdSettings = field(default_factory=ThresholdSettings)
+    optim: OptimSettings = field(default_factory=OptimSettings)
+    densify: DensifySettings = field(default_factory=DensifySettings)
+    output: OutputSettings = field(default_factory=OutputSettings)

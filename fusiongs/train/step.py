@@ -1,0 +1,142 @@
+"""One training iteration's losses (../shared/METHOD.md §1 and §3), as a function of the state.
+
+The N exposure instants of one frame and the instants of the free event windows are rendered in
+one rasteriser call; the blur loss uses the first N renders, the event windows pairs of them
+(E2NeRF) and the free renders.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from fusiongs.events.hpf import high_pass_filter
+from fusiongs.losses.blur import apply_response, blur_loss, exposure_average, exposure_instants
+from fusiongs.losses.colour import channel_weights_for, demosaic_event_maps
+from fusiongs.losses.event import (
+    delta_log,
+    event_loss_band,
+    event_loss_mse,
+    event_loss_pvc,
+    sample_event_pixels,
+    select_channel,
+)
+from fusiongs.render.rasterize import RenderMeta
+from fusiongs.train.data import TrainData
+from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
+from fusiongs.train.settings import DeblurConfig, EventSettings
+from fusiongs.train.state import FusionState
+
+
+@dataclass
+class StepResult:
+    loss: torch.Tensor
+    parts: dict[str, float]
+    meta: RenderMeta
+    renders: torch.Tensor  # [T, H, W, 3] linear
+
+
+def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, channels: int,
+                   grey_weights: tuple[float, float, float]) -> torch.Tensor:
+    """Blurry frame ``[H, W, C]`` from ``[N, H, W, 3]`` sharp linear renders of one exposure.
+
+    ``B = CRF(g · mean_k L_k)`` (METHOD.md §1); a monochrome frame (C = 1) sees ``w · L``.
+    """
+    mean = exposure_average(linear) * torch.exp(log_gain)
+    if channels == 1:
+        w = torch.tensor(grey_weights, dtype=mean.dtype, device=mean.device)
+        mean = (mean * w).sum(-1, keepdim=True)
+    return apply_response(mean, response)
+
+
+def _hpf_target(data: TrainData, t_a: float, t_b: float, ev: EventSettings, theta0: float,
+                device: torch.device) -> torch.Tensor:
+    """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; METHOD.md §2)."""
+    v = high_pass_filter(data.events, [t_a * 1e6, t_b * 1e6], tau=ev.hpf_tau, contrast=theta0)
+    return torch.from_numpy((v[1] - v[0]) / theta0).to(device)
+
+
+def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, lin_a: torch.Tensor,
+                      lin_b: torch.Tensor, t_a: float, t_b: float, gen: torch.Generator) -> torch.Tensor:
+    """Event loss of one window ``[t_a, t_b)`` from the linear renders ``[H, W, 3]`` at its ends."""
+    ev = cfg.events
+    device = lin_a.device
+    counts = data.count_maps(t_a, t_b, device)  # [2, H, W]
+    pix = sample_event_pixels(counts, min(ev.pixels, counts[0].numel()), ev.frac_with_events, gen)
+    la, lb = lin_a.reshape(-1, 3)[pix], lin_b.reshape(-1, 3)[pix]
+    signed = counts[0] - counts[1]
+    if ev.loss == "pvc":
+        signed = _hpf_target(data, t_a, t_b, ev, cfg.threshold.init, device)
+    th = state.threshold
+    if data.cfa_index is None:  # grey sensor: I = w · L
+        d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
+        th_p, th_n = th.theta()
+        n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
+        d_gt = signed.reshape(-1)[pix, None]
+        weights = None
+    elif ev.colour_mode == "mask":  # each pixel in its own CFA channel on the raw grid
+        ch = data.cfa_index.reshape(-1)[pix]
+        d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)
+        th_p, th_n = th.theta(pix, channel=ch)
+        n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
+        d_gt = signed.reshape(-1)[pix, None]
+        weights = channel_weights_for(ch, ev.channel_weights)
+    else:  # demosaic the window's event maps into three-channel targets (Event-3DGS app. C)
+        pattern = data.events.cfa
+        maps = demosaic_event_maps(torch.stack([counts[0], counts[1], signed]), pattern)
+        flat = maps.reshape(3, -1, 3)[:, pix]  # [3, P, 3]
+        n_pos, n_neg, d_gt = flat[0], flat[1], flat[2]
+        d = delta_log(la, lb, "rgb", eps=ev.log_eps)
+        th_p, th_n = th.theta()
+        weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device=device)
+    if ev.loss == "mse":
+        return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights)
+    if ev.loss == "band":
+        return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights)
+    return event_loss_pvc(d, d_gt, th_p, th_n, kind="band", beta=ev.beta, channel_weights=weights)
+
+
+def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
+                  lam_ev: float, gen: torch.Generator) -> StepResult:
+    """Render and compute ``L_blur + λ_ev · L_ev`` for one frame (METHOD.md §3).
+
+    Args:
+        frame: index of the frame whose exposure is rendered (ignored without frames).
+        lam_ev: event weight now (0 during the warm-up: no event renders are made then).
+    """
+    n = cfg.blur.n_samples
+    use_events = data.events is not None and lam_ev > 0
+    has_frames = data.n_frames > 0
+    times = []
+    if has_frames:
+        s, e = data.exposures[frame]
+        times.append(exposure_instants(s, e, n).to(torch.float64))
+    free = torch.zeros(0, 2, dtype=torch.float64)
+    if use_events and cfg.events.windows_free > 0:
+        free = sample_free_windows(cfg.events.windows_free, data.t_range, data.frame_interval, gen,
+                                   min(cfg.events.min_window, data.frame_interval))
+        times.append(free.reshape(-1))
+    t_all = torch.cat(times)
+    lin, _, meta = state.render(data.camera, t_all, cfg.backend)
+    parts: dict[str, float] = {}
+    loss = lin.new_zeros(())
+    if has_frames:
+        pred = predict_blurry(lin[:n], state.log_gain[frame], data.response,
+                              data.targets.shape[-1], cfg.events.grey_weights)
+        l_blur = blur_loss(pred[None], data.targets[frame][None], cfg.blur.ssim_lambda)
+        loss = loss + cfg.blur.weight * l_blur
+        parts["blur"] = float(l_blur.detach())
+    if use_events:
+        windows = []
+        if has_frames and n >= 2 and cfg.events.windows_inside > 0:
+            pairs = sample_exposure_pairs(n, cfg.events.windows_inside, gen)
+            windows += [(int(j), int(k), float(t_all[j]), float(t_all[k])) for j, k in pairs]
+        base = n if has_frames else 0
+        windows += [(base + 2 * i, base + 2 * i + 1, float(a), float(b))
+                    for i, (a, b) in enumerate(free)]
+        l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen)
+                   for j, k, ta, tb in windows) / max(len(windows), 1)
+        loss = loss + lam_ev * l_ev
+        parts["event"] = float(l_ev.detach())
+    return StepResult(loss=loss, parts=parts, meta=meta, renders=lin)

@@ -1,0 +1,232 @@
+"""The training loop of ``fusiongs deblur``: a short list of named steps.
+
+Each iteration: pick a frame → schedules (λ_ev, learning rates, θ frozen or not) → render and
+losses (:func:`fusiongs.train.step.training_step`) → backward → densify → optimiser steps →
+history, progress bar and checkpoints.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from fusiongs.camera.trajectory import Trajectory
+from fusiongs.camera.tum import PoseSamples
+from fusiongs.io.scene import Scene
+from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
+from fusiongs.scene.gaussians import GaussianModel
+from fusiongs.scene.optim import GaussianLR, make_optimizer
+from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
+from fusiongs.train.config import to_dict
+from fusiongs.train.data import TrainData, prepare_data
+from fusiongs.train.schedules import event_weight, log_linear_lr
+from fusiongs.train.settings import DeblurConfig
+from fusiongs.train.state import FusionState, build_state, scene_extent
+from fusiongs.train.step import training_step
+
+
+@dataclass
+class History:
+    """Per-iteration curves kept for the report (every ``record_every`` iterations)."""
+
+    iteration: list[int] = field(default_factory=list)
+    loss: list[float] = field(default_factory=list)
+    blur: list[float] = field(default_factory=list)
+    event: list[float] = field(default_factory=list)
+    theta_pos: list[list[float]] = field(default_factory=list)
+    theta_neg: list[list[float]] = field(default_factory=list)
+    n_gaussians: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+    render_seconds: float = 0.0
+
+
+@dataclass
+class Trained:
+    """A finished (or interrupted) run."""
+
+    state: FusionState
+    data: TrainData
+    config: DeblurConfig
+    history: History
+    iteration: int
+    poses: PoseSamples
+
+
+def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
+    d = cfg.densify
+    return DensifyConfig(grow_grad2d=d.grad_threshold, refine_start=d.start, refine_stop=d.stop,
+                         refine_every=d.every, reset_opacity_every=d.reset_opacity_every)
+
+
+def _optimizers(state: FusionState, cfg: DeblurConfig, extent: float) -> dict[str, torch.optim.Optimizer]:
+    o = cfg.optim
+    lr = GaussianLR(means=o.lr_means, log_scales=o.lr_scales, quats=o.lr_quats,
+                    opacity_logits=o.lr_opacities, sh0=o.lr_colors, shN=o.lr_colors / 20)
+    opts: dict[str, torch.optim.Optimizer] = {"gaussians": make_optimizer(state.model, lr, extent)}
+    opts["threshold"] = torch.optim.Adam(state.threshold.parameters(), lr=cfg.threshold.lr)
+    if state.trajectory.delta is not None:
+        opts["pose"] = torch.optim.Adam([state.trajectory.delta], lr=o.lr_pose)
+    if state.log_gain.requires_grad:
+        opts["gain"] = torch.optim.Adam([state.log_gain], lr=o.lr_gain)
+    return opts
+
+
+def _set_learning_rates(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int,
+                        extent: float) -> None:
+    o = cfg.optim
+    for g in opts["gaussians"].param_groups:
+        if g["name"] == "means":
+            g["lr"] = log_linear_lr(it, o.lr_means * extent, o.lr_means_final * extent, o.iterations)
+    if "pose" in opts:
+        span = max(o.iterations - o.pose_start, 1)
+        for g in opts["pose"].param_groups:
+            g["lr"] = log_linear_lr(max(it - o.pose_start, 0), o.lr_pose, o.lr_pose_final, span)
+
+
+def build_trajectory(scene: Scene, cfg: DeblurConfig, device: torch.device) -> Trajectory:
+    """The scene's poses as a refinable trajectory (clamped outside its time range)."""
+    return Trajectory(scene.poses, mode=cfg.trajectory, refine=cfg.optim.refine_poses,
+                      knot_spacing=cfg.knot_spacing or None, outside="clamp", device=device)
+
+
+def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator) -> dict[str, Any]:
+    s = tr.state
+    return {
+        "iteration": tr.iteration,
+        "config": to_dict(tr.config),
+        "camera": asdict(tr.data.camera),
+        "n_gaussians": s.model.n,
+        "sh_degree": s.model.max_sh_degree,
+        "model": s.model.state_dict(),
+        "trajectory": {"state": s.trajectory.state_dict(), "mode": s.trajectory.mode,
+                       "spacing": s.trajectory.spacing, "t": tr.poses.t, "c2w": tr.poses.c2w},
+        "threshold": s.threshold.state_dict(),
+        "threshold_channels": s.threshold.channels,
+        "log_gain": s.log_gain.detach().clone(),
+        "optimizers": {k: o.state_dict() for k, o in opts.items()},
+        "history": asdict(tr.history),
+        "generator": gen.get_state(),
+    }
+
+
+def _restore(ckpt: dict[str, Any], state: FusionState) -> None:
+    state.model = GaussianModel.empty(int(ckpt["n_gaussians"]), int(ckpt["sh_degree"]),
+                                      device=state.log_gain.device)
+    state.model.load_state_dict(ckpt["model"])
+    state.trajectory.load_state_dict(ckpt["trajectory"]["state"])
+    state.threshold.load_state_dict(ckpt["threshold"])
+    with torch.no_grad():
+        state.log_gain.copy_(ckpt["log_gain"])
+
+
+def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False,
+          progress_psnr=None) -> Trained:
+    """Fit the scene; checkpoints go to ``out_dir/checkpoint.pt`` (also on Ctrl-C).
+
+    Args:
+        progress_psnr: optional callable ``(state, data) -> float`` shown in the progress bar
+            every ``output.eval_every`` iterations (e.g. deblur-view PSNR against truth).
+    """
+    from tqdm import tqdm
+
+    device = torch.device(cfg.device)
+    torch.manual_seed(cfg.seed)
+    gen = torch.Generator().manual_seed(cfg.seed)
+    data = prepare_data(scene, device, cfg.events.enabled)
+    trajectory = build_trajectory(scene, cfg, device)
+    state = build_state(data, scene.poses.c2w, trajectory, cfg, device)
+    extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
+    start, history = 0, History()
+    ckpt_path = out_dir / "checkpoint.pt"
+    ckpt = load_checkpoint(ckpt_path) if resume and ckpt_path.exists() else None
+    if ckpt is not None:
+        _restore(ckpt, state)
+        start = int(ckpt["iteration"])
+        history = History(**ckpt["history"])
+        gen.set_state(ckpt["generator"])
+    opts = _optimizers(state, cfg, extent)
+    if ckpt is not None:
+        for k, o in opts.items():
+            if k in ckpt.get("optimizers", {}):
+                o.load_state_dict(ckpt["optimizers"][k])
+    strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
+    tr = Trained(state, data, cfg, history, start, scene.poses)
+    order = torch.randperm(max(data.n_frames, 1), generator=gen)
+    bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
+               disable=not cfg.output.progress, desc="fusiongs", dynamic_ncols=True)
+    psnr_now = float("nan")
+    t_begin = time.perf_counter()
+    try:
+        for it in bar:
+            frame = int(order[it % len(order)])
+            lam_ev = event_weight(it, cfg.events.warmup, cfg.events.weight, cfg.events.ramp)
+            _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
+            res = training_step(state, data, cfg, frame, lam_ev, gen)
+            strategy.step_pre_backward(res.meta)
+            loss = res.loss + _regularisers(state, cfg)
+            loss.backward()
+            if cfg.densify.enabled and state.model.n < cfg.densify.max_gaussians:
+                strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
+            _optimise(opts, cfg, it)
+            tr.iteration = it + 1
+            _record(history, it, float(loss), res.parts, state)
+            if progress_psnr is not None and (it + 1) % cfg.output.eval_every == 0:
+                psnr_now = progress_psnr(state, data)
+            bar.set_postfix(loss=f"{float(loss):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
+            every = cfg.output.checkpoint_every
+            if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
+                save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+    except KeyboardInterrupt:
+        history.seconds += time.perf_counter() - t_begin
+        save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+        raise
+    history.seconds += time.perf_counter() - t_begin
+    save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+    return tr
+
+
+def _schedule(state: FusionState, strategy: DensifyStrategy, opts, cfg: DeblurConfig, it: int,
+              extent: float, lam_ev: float) -> None:
+    """Learning rates, θ frozen during the warm-up, opacity reset off once events are on."""
+    _set_learning_rates(opts, cfg, it, extent)
+    learn_theta = cfg.threshold.learn and lam_ev > 0
+    state.threshold.unfreeze() if learn_theta else state.threshold.freeze()
+    if lam_ev > 0:
+        strategy.disable_opacity_reset()
+
+
+def _regularisers(state: FusionState, cfg: DeblurConfig) -> torch.Tensor:
+    if cfg.threshold.regularise > 0:
+        return cfg.threshold.regularise * state.threshold.regularisation()
+    return state.log_gain.new_zeros(())
+
+
+def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int) -> None:
+    for name, opt in opts.items():
+        if name == "pose" and it < cfg.optim.pose_start:
+            opt.zero_grad(set_to_none=True)
+            continue
+        opt.step()
+        opt.zero_grad(set_to_none=True)
+
+
+def _record(h: History, it: int, loss: float, parts: dict[str, float], state: FusionState) -> None:
+    h.iteration.append(it)
+    h.loss.append(loss)
+    h.blur.append(parts.get("blur", math.nan))
+    h.event.append(parts.get("event", math.nan))
+    with torch.no_grad():
+        tp, tn = state.threshold.theta()
+    h.theta_pos.append([float(v) for v in tp.reshape(-1)])
+    h.theta_neg.append([float(v) for v in tn.reshape(-1)])
+    h.n_gaussians.append(state.model.n)
+
+
+def as_numpy_images(x: torch.Tensor) -> np.ndarray:
+    return x.detach().cpu().numpy().astype(np.float32)

@@ -1,0 +1,65 @@
+"""Readers on the real recordings of ../shared/data/real (skipped when absent).
+
+The README there lists counts, durations and ON fractions; the Prophesee decoders are also compared
+event by event with a second, independent decoder (``faery``) when it is installed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fusiongs.errors import InputError
+from fusiongs.events.readers import read_aedat4, read_events, read_prophesee_raw
+from tests.conftest import real_file
+
+# file, size override, events, duration (µs, rounded as in the README), ON fraction (3 decimals)
+CASES = [
+    ("davis346_mono.aedat4", {}, 78_830, 2.36e6, 0.523),
+    ("dvxplorer_320x240.aedat4", {}, 111_954, 0.59e6, 0.491),
+    ("prophesee_evt2_640x480.raw", {"width": 640, "height": 480}, 521_252, 96e3, None),
+    ("prophesee_evt3_1280x720.raw", {}, 1_218_618, 10.77e6, None),
+]
+
+
+@pytest.mark.parametrize("name, kw, count, duration_us, on", CASES)
+def test_real_recordings_match_the_readme(name, kw, count, duration_us, on):
+    s = read_events(real_file(name), **kw)
+    assert len(s) == count
+    assert s.duration_us == pytest.approx(duration_us, rel=5e-3)
+    if on is not None:
+        assert round(s.polarity_balance, 3) == on
+    assert np.all(np.diff(s.t) >= 0)
+
+
+def test_davis_aps_frames_and_exposures():
+    _, frames = read_aedat4(real_file("davis346_mono.aedat4"))
+    assert len(frames) == 59 and frames.images.shape == (59, 260, 346)
+    assert np.all(frames.exposure_end - frames.exposure_start == 500)
+    assert np.median(np.diff(frames.t)) == pytest.approx(40_000, rel=0.01)  # 25 fps
+
+
+def test_evt2_without_geometry_header_needs_a_size():
+    with pytest.raises(InputError, match="geometry"):
+        read_prophesee_raw(real_file("prophesee_evt2_640x480.raw"))
+
+
+@pytest.mark.parametrize("name, kw", [("prophesee_evt2_640x480.raw", {"width": 640, "height": 480}),
+                                      ("prophesee_evt3_1280x720.raw", {})])
+def test_prophesee_decoders_agree_with_faery_on_every_event(name, kw):
+    faery = pytest.importorskip("faery")
+    path = real_file(name)
+    ours = read_prophesee_raw(path, **kw)
+    ref = np.concatenate(list(faery.events_stream_from_file(path)))
+    assert len(ours) == len(ref)
+    assert np.array_equal(ours.t, ref["t"].astype(np.int64))
+    assert np.array_equal(ours.x, ref["x"]) and np.array_equal(ours.y, ref["y"])
+    assert np.array_equal(ours.p > 0, ref["on"])
+
+
+def test_truncated_real_files_are_input_errors(tmp_path):
+    for name, cut in [("davis346_mono.aedat4", 3_000_000), ("prophesee_evt3_1280x720.raw", 1_000_000)]:
+        data = real_file(name).read_bytes()[:cut]
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(InputError, match=name):
+            read_events(tmp_path / name)
