@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import fusiongs  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch is imported)
 import numpy as np
 import pytest
 import torch

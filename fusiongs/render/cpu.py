@@ -1,0 +1,80 @@
+"""CPU compositing backend: the numba kernels of ``_cpu_kernels`` behind a torch autograd Function."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from fusiongs.render import _cpu_kernels as K
+from fusiongs.render._boxes import pixel_boxes, sorted_visible
+from fusiongs.render.projection import Projected
+
+
+def _np(t: Tensor) -> np.ndarray:
+    return t.detach().contiguous().numpy()
+
+
+class CompositeCPU(torch.autograd.Function):
+    """Differentiable compositing on CPU (numba forward and hand-written backward).
+
+    Forward inputs: ``means2d [C,N,2]``, ``conics [C,N,3]``, ``colors [C,N,D]``, ``opacities [C,N]``
+    (differentiable), then ``ids [P]``, ``box [P,4]``, ``cam_off [C+1]`` (int64, from
+    :func:`sorted_visible` / :func:`pixel_boxes`), ``width``, ``height``.
+    Outputs: ``images [C,H,W,D]`` and ``alphas [C,H,W,1]`` (no background).
+    """
+
+    @staticmethod
+    def forward(ctx, means2d, conics, colors, opacities, ids, box, cam_off, width, height):
+        C, N, D = colors.shape
+        dtype = colors.dtype
+        npd = np.float64 if dtype == torch.float64 else np.float32
+        m = _np(means2d).astype(npd, copy=False)
+        con = _np(conics).astype(npd, copy=False)
+        arrs = (np.ascontiguousarray(m[..., 0]), np.ascontiguousarray(m[..., 1]),
+                np.ascontiguousarray(con[..., 0]), np.ascontiguousarray(con[..., 1]),
+                np.ascontiguousarray(con[..., 2]), _np(opacities).astype(npd, copy=False))
+        col = _np(colors)
+        ids_np, box_np, off_np = _np(ids), _np(box), _np(cam_off)
+        row_off, rows, entry_row0 = K.row_lists(box_np, off_np, height)
+        img = np.zeros((C, height, width, D), npd)
+        tfin = np.empty((C, height, width), npd)
+        last = np.empty((C, height, width), np.int64)
+        K.forward(ids_np, box_np, row_off, rows, *arrs, col, height, width, img, tfin, last)
+        ctx.saved = (ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width,
+                     height)
+        img_t = torch.from_numpy(img)
+        alpha_t = torch.from_numpy(1.0 - tfin).unsqueeze(-1)
+        return img_t, alpha_t
+
+    @staticmethod
+    def backward(ctx, v_img, v_alpha):
+        ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width, height = \
+            ctx.saved
+        C, N, D = col.shape
+        npd = col.dtype
+        v_img_np = _np(v_img).astype(npd, copy=False)
+        v_alpha_np = np.ascontiguousarray(_np(v_alpha)[..., 0].astype(npd, copy=False))
+        gbuf = np.zeros((int(entry_row0[-1]), 6 + D), npd)
+        K.backward(ids_np, box_np, row_off, rows, entry_row0, *arrs, col, height, width, tfin, last,
+                   v_img_np, v_alpha_np, gbuf)
+        out = np.zeros((C, N, 6 + D), npd)
+        K.reduce_grads(ids_np, off_np, entry_row0, gbuf, out)
+        g = torch.from_numpy(out)
+        return (g[..., 0:2], g[..., 2:5], g[..., 6:], g[..., 5], None, None, None, None, None)
+
+
+def composite_cpu(proj: Projected, colors: Tensor, width: int, height: int) -> tuple[Tensor, Tensor]:
+    """Composite projected Gaussians with the numba kernels (same contract as ``composite_pairs``).
+
+    Args:
+        proj: screen-space Gaussians of C cameras. colors: ``[C, N, D]`` (float32 or float64, CPU).
+        width, height: image size (px).
+
+    Returns:
+        ``(images [C, H, W, D], alphas [C, H, W, 1])`` without background.
+    """
+    cam, gid, offsets = sorted_visible(proj.depths, proj.radii)
+    box = pixel_boxes(proj.means2d[cam, gid], proj.radii[cam, gid], width, height)
+    return CompositeCPU.apply(proj.means2d, proj.conics, colors, proj.opacities, gid, box, offsets,
+                              width, height)
