@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusiongs.errors import InputError
-from fusiongs.events.cfa import demosaic
+from fusiongs.events.cfa import cfa_channel_index, demosaic
 from fusiongs.events.stream import EventStream
 
 THETA_GRID = tuple(np.round(np.geomspace(0.05, 0.6, 23), 4))
@@ -163,12 +163,60 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
     return (b / edi_ratio(counts, theta, events.cfa)).astype(np.float32)
 
 
+def _between_mids(events: EventStream, t_a: float, t_b: float) -> np.ndarray:
+    """``[2, H, W]`` ON/OFF counts from one mid-exposure ``t_a`` to the next ``t_b`` (seconds)."""
+    return events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6))).astype(np.float64)
+
+
+def estimate_theta_sequence(frames_linear: np.ndarray, events: EventStream, t_start, t_end,
+                            n_samples: int = 32, grid=THETA_GRID) -> float:
+    """One threshold for a frame sequence from the consistency of consecutive EDI images.
+
+    With the right ``theta`` the EDI image of frame i, carried to the next mid-exposure by the
+    events in between, equals the EDI image of frame i+1 (the multiple-frame consistency of Pan et
+    al., CVPR 2019, Sec. 4): ``log L_{i+1} - log L_i = theta_+ N_+ - theta_- N_-``. The estimate
+    minimises the mean absolute residual of that relation over all consecutive pairs, in each
+    pixel's own channel for CFA events (luminance for grey events).
+
+    Args:
+        frames_linear: ``[F, H, W, C]`` blurry frames in linear light, F >= 2, time-ordered.
+        events: the stream; ``t_start``, ``t_end``: ``[F]`` exposure windows (s).
+        n_samples, grid: as :func:`estimate_theta`.
+
+    Returns:
+        the best threshold of ``grid`` (one value for both polarities).
+    """
+    f = np.asarray(frames_linear, dtype=np.float64)
+    if f.ndim != 4 or f.shape[0] < 2:
+        raise InputError("edi", "frames", "at least two frames [F, H, W, C] for a sequence estimate",
+                         f.shape)
+    ts, te = np.asarray(t_start, dtype=np.float64), np.asarray(t_end, dtype=np.float64)
+    mids = 0.5 * (ts + te)
+    counts = [event_count_samples(events, float(a), float(b), n_samples) for a, b in zip(ts, te)]
+    between = [_between_mids(events, mids[i], mids[i + 1]) for i in range(len(f) - 1)]
+    if events.cfa is None:
+        pick = lambda img: img.mean(axis=-1)  # luminance-like mean of the channels
+    else:
+        ch = cfa_channel_index(events.cfa, events.height, events.width).astype(np.int64)
+        pick = lambda img: np.take_along_axis(img, ch[..., None], axis=-1)[..., 0]
+    eps = 1e-3 * max(float(f.mean()), 1e-12)
+    scores = []
+    for th in grid:  # a few candidate thresholds, each a vectorised image operation
+        logs = [np.log(np.maximum(pick(f[i] / edi_ratio(counts[i], th, events.cfa)), eps))
+                for i in range(len(f))]
+        res = [logs[i + 1] - logs[i] - th * (between[i][0] - between[i][1]) for i in range(len(between))]
+        scores.append(float(np.mean(np.abs(np.stack(res)))))
+    return float(grid[int(np.argmin(scores))])
+
+
 def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
     """EDI-deblur every frame of a :class:`~fusiongs.io.scene.Scene`.
 
     Args:
         scene: a scene with events and frames.
-        theta: threshold, polarity pair, or ``None`` to estimate one per frame.
+        theta: threshold, polarity pair, or ``None`` to estimate one: from the consistency of
+            consecutive frames (:func:`estimate_theta_sequence`) when there are two or more, else
+            per frame (:func:`estimate_theta`).
         n_samples: instants per exposure.
 
     Returns:
@@ -180,6 +228,8 @@ def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
     if len(fs) == 0:
         raise InputError("edi", "frames", "a scene with at least one frame", "none")
     lin = fs.to_linear()
+    if theta is None and len(fs) >= 2:
+        theta = estimate_theta_sequence(lin, scene.events, fs.t_start, fs.t_end, n_samples)
     out = [edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), theta,
                       n_samples) for i in range(len(fs))]  # loop over frames, not pixels
     return np.stack(out)

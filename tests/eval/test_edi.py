@@ -181,3 +181,17 @@ def test_edi_command_writes_one_png_per_frame(grey_data, tmp_path):
     assert got.shape == (H, W, 1) and (tmp_path / "out" / "b.png").is_file()
     truth = linear_to_srgb(sharp)
     assert _psnr(got, truth) > _psnr(linear_to_srgb(blurry), truth) + 8.0
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_sequence_threshold_estimate_is_near_the_simulated_threshold(seed):
+    from fusiongs.eval.edi import estimate_theta_sequence
+    from fusiongs.sim.simulate import SimConfig, run_simulation
+
+    cfg = SimConfig(preset="wall", width=48, height=36, duration=0.3, frames=3, exposure=0.05,
+                    dvs_rate_hz=800.0, blur_samples=8, supersample=1, novel=0, seed=seed)
+    res = run_simulation(cfg)
+    fs = res.scene.frames
+    theta = estimate_theta_sequence(fs.to_linear(), res.scene.events, fs.t_start, fs.t_end)
+    nominal = 0.5 * (cfg.dvs.theta_on + cfg.dvs.theta_off)
+    assert abs(theta - nominal) < 0.25 * nominal
