@@ -1,6 +1,6 @@
 """Shared test helpers: locating the optional real recordings, seeding."""
 
-from __future__ import annotations
+from __future__ import annotations  # noqa: I001  (fusiongs first: it sets OMP_WAIT_POLICY before torch)
 
 from pathlib import Path
 

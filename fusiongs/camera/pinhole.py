@@ -49,7 +49,7 @@ class PinholeCamera:
         return torch.tensor([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]],
                             dtype=dtype, device=device)
 
-    def scaled(self, factor: float) -> "PinholeCamera":
+    def scaled(self, factor: float) -> PinholeCamera:
         """The same camera at ``factor`` times the resolution (rounded)."""
         w, h = max(1, round(self.width * factor)), max(1, round(self.height * factor))
         sx, sy = w / self.width, h / self.height

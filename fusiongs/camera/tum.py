@@ -82,7 +82,8 @@ def read_tum(path: str | Path) -> PoseSamples:
         try:
             vals = [float(v) for v in parts]
         except ValueError:
-            raise InputError(path, f"line {lineno}", "8 numbers 't tx ty tz qx qy qz qw'", repr(line)) from None
+            raise InputError(path, f"line {lineno}", "8 numbers 't tx ty tz qx qy qz qw'",
+                             repr(line)) from None
         if len(vals) != 8 or not np.all(np.isfinite(vals)):
             raise InputError(path, f"line {lineno}", "8 finite numbers 't tx ty tz qx qy qz qw'", repr(line))
         rows.append(vals)

@@ -20,14 +20,16 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusiongs.configs import config_file
-    from fusiongs.sim.simulate import SimConfig, write_simulated_scene
+    from fusiongs.sim.simulate import SimConfig, run_simulation
+    from fusiongs.sim.write import write_simulated_scene
     from fusiongs.train.pipeline import run_deblur
 
     out = Path(args.out)
     t0 = time.perf_counter()
     sim = SimConfig(preset=args.preset, width=96, height=72, duration=0.5, frames=6, exposure=0.05,
                     cfa=args.cfa, seed=args.seed, blur_samples=24, dvs_rate_hz=600.0)
-    write_simulated_scene(sim.validate(), out / "scene")
+    res = run_simulation(sim)
+    write_simulated_scene(res.scene, res.gt, out / "scene", stats=res.stats, overwrite=True)
     print(f"simulated {out / 'scene'} in {time.perf_counter() - t0:.1f} s")
     run_deblur(out / "scene", out / "run", config=config_file("deblur_fast.yaml"),
                overrides=args.overrides)

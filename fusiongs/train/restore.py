@@ -22,7 +22,8 @@ def restore_state(path: str | Path) -> tuple[FusionState, PinholeCamera, dict]:
     ckpt = load_checkpoint(path)
     try:
         cam = ckpt["camera"]
-        camera = PinholeCamera(**{**cam, "distortion": tuple(cam["distortion"]) if cam.get("distortion") else None})
+        dist = tuple(cam["distortion"]) if cam.get("distortion") else None
+        camera = PinholeCamera(**{**cam, "distortion": dist})
         model = GaussianModel.empty(int(ckpt["n_gaussians"]), int(ckpt["sh_degree"]))
         model.load_state_dict(ckpt["model"])
         tj = ckpt["trajectory"]

@@ -7,6 +7,7 @@ one rasteriser call; the blur loss uses the first N renders, the event windows p
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import torch
@@ -127,6 +128,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         l_blur = blur_loss(pred[None], data.targets[frame][None], cfg.blur.ssim_lambda)
         loss = loss + cfg.blur.weight * l_blur
         parts["blur"] = float(l_blur.detach())
+        mse = float(((pred.detach().clamp(0, 1) - data.targets[frame]) ** 2).mean())
+        parts["psnr"] = 10.0 * math.log10(1.0 / max(mse, 1e-12))
     if use_events:
         windows = []
         if has_frames and n >= 2 and cfg.events.windows_inside > 0:

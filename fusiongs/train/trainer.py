@@ -171,14 +171,17 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg)
             loss.backward()
+            _optimise(opts, cfg, it)
             if cfg.densify.enabled and state.model.n < cfg.densify.max_gaussians:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
-            _optimise(opts, cfg, it)
             tr.iteration = it + 1
-            _record(history, it, float(loss), res.parts, state)
+            _record(history, it, float(loss.detach()), res.parts, state)
+            if "psnr" in res.parts:  # running mean of the blurry-frame PSNR (re-rendered input)
+                p = res.parts["psnr"]
+                psnr_now = p if math.isnan(psnr_now) else 0.9 * psnr_now + 0.1 * p
             if progress_psnr is not None and (it + 1) % cfg.output.eval_every == 0:
                 psnr_now = progress_psnr(state, data)
-            bar.set_postfix(loss=f"{float(loss):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
+            bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
                 save_checkpoint(ckpt_path, _payload(tr, opts, gen))

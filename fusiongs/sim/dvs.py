@@ -1,0 +1,180 @@
+"""A DVS (event camera) pixel model on densely sampled linear radiance.
+
+Each pixel ``u`` fires an event of polarity ``p = +-1`` whenever its log intensity
+``log(I_u(t) + eps)`` moves one threshold ``theta_p(u)`` away from the level stored at its last
+event (the standard DVS model: Lichtsteiner et al., IEEE JSSC 2008; the simulator form with linear
+interpolation between render samples follows ESIM, Rebecq et al., CoRL 2018). Between two render
+samples the log intensity is interpolated linearly in time, so a step that crosses several levels
+gives several events with interpolated timestamps. Per-pixel thresholds vary around distinct ON
+and OFF nominal values; a refractory period drops events that follow the pixel's previous event too
+closely (the stored level still advances, so the change is lost as in a real pixel); background
+activity adds Poisson noise events. Grey sensors see ``I = w . L`` (Rec.601 weights), colour
+sensors one Bayer channel per pixel.
+
+Vectorised over pixels; the only Python loop is over time steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from fusiongs.events.cfa import cfa_channel_index
+
+REC601 = (0.299, 0.587, 0.114)
+
+
+@dataclass(frozen=True)
+class DVSParams:
+    """Event sensor parameters.
+
+    Attributes:
+        theta_on, theta_off: nominal ON / OFF contrast thresholds (log units).
+        theta_sigma: standard deviation of the per-pixel threshold mismatch (log units).
+        theta_min: smallest threshold a pixel may get after mismatch.
+        refractory_s: refractory period in seconds.
+        ba_rate_hz: background-activity noise rate per pixel (Hz), half ON half OFF.
+        eps: offset inside ``log(I + eps)`` (radiance units; scenes have radiance range ~1).
+    """
+
+    theta_on: float = 0.25
+    theta_off: float = 0.22
+    theta_sigma: float = 0.03
+    theta_min: float = 0.05
+    refractory_s: float = 100e-6
+    ba_rate_hz: float = 0.1
+    eps: float = 1e-3
+
+
+def sensor_log(rgb: torch.Tensor, cfa: str | None, eps: float) -> np.ndarray:
+    """Log intensity each event pixel sees.
+
+    Args:
+        rgb: ``[H, W, 3]`` linear radiance.
+        cfa: ``None`` (grey: Rec.601 weights) or a Bayer pattern name (one channel per pixel).
+        eps: log offset.
+
+    Returns:
+        ``[H * W]`` float32 ``log(I + eps)``, row-major pixel order.
+    """
+    h, w, _ = rgb.shape
+    if cfa is None:
+        inten = rgb @ torch.tensor(REC601, dtype=rgb.dtype, device=rgb.device)
+    else:
+        idx = torch.as_tensor(cfa_channel_index(cfa, h, w).astype(np.int64), device=rgb.device)
+        inten = torch.gather(rgb, 2, idx[..., None])[..., 0]
+    return torch.log(inten.clamp_min(0) + eps).reshape(-1).cpu().numpy().astype(np.float32)
+
+
+def pixel_thresholds(params: DVSParams, n_pixels: int, rng: np.random.Generator,
+                     scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ON and OFF thresholds ``[P]`` float64: ``scale * (nominal + sigma * N(0, 1))``."""
+    z = rng.standard_normal((2, n_pixels))
+    on = np.maximum(params.theta_on + params.theta_sigma * z[0], params.theta_min) * scale
+    off = np.maximum(params.theta_off + params.theta_sigma * z[1], params.theta_min) * scale
+    return on, off
+
+
+def count_events(logs: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray) -> int:
+    """Number of threshold crossings (refractory period and noise ignored): cheap, for tuning.
+
+    Args:
+        logs: ``[K + 1, P]`` log intensity at the render instants. theta_on, theta_off: ``[P]``.
+    """
+    ref = logs[0].astype(np.float64)
+    total = 0
+    for k in range(1, logs.shape[0]):
+        d = logs[k] - ref
+        n_on = np.floor(np.maximum(d, 0) / theta_on)
+        n_off = np.floor(np.maximum(-d, 0) / theta_off)
+        ref = ref + n_on * theta_on - n_off * theta_off
+        total += int(n_on.sum() + n_off.sum())
+    return total
+
+
+def dvs_events(logs: np.ndarray, times: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray,
+               refractory_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Events of all pixels from log intensities sampled at ``times``.
+
+    Args:
+        logs: ``[K + 1, P]`` float log intensity per render instant and pixel.
+        times: ``[K + 1]`` float64 increasing instants (s).
+        theta_on, theta_off: ``[P]`` float64 per-pixel thresholds (log units).
+        refractory_s: refractory period (s); 0 disables it.
+
+    Returns:
+        ``t [E]`` int64 µs (sorted), ``pixel [E]`` int64 flat index, ``p [E]`` int8 +-1. Each pixel's
+        reference level starts at ``logs[0]``; without refractory losses the signed sum of
+        thresholds of a pixel's events stays within one threshold of its log change.
+    """
+    n_pix = logs.shape[1]
+    ref = logs[0].astype(np.float64)
+    t_last = np.full(n_pix, -np.inf)
+    out_t, out_i, out_p = [], [], []
+    for k in range(logs.shape[0] - 1):
+        a, b = logs[k].astype(np.float64), logs[k + 1].astype(np.float64)
+        t0, dt = float(times[k]), float(times[k + 1] - times[k])
+        d = b - ref
+        n_on = np.floor(np.maximum(d, 0) / theta_on).astype(np.int64)
+        n_off = np.floor(np.maximum(-d, 0) / theta_off).astype(np.int64)
+        idx = np.flatnonzero(n_on + n_off)
+        if idx.size == 0:
+            continue
+        up = n_on[idx] > 0
+        n = np.where(up, n_on[idx], n_off[idx])
+        sign = np.where(up, 1.0, -1.0)
+        th = np.where(up, theta_on[idx], theta_off[idx])
+        slope = (b[idx] - a[idx]) / dt  # log units per second, non-zero where events fire
+        # First crossing time and spacing of the following crossings (linear in time).
+        tau1 = t0 + np.clip((ref[idx] + sign * th - a[idx]) / slope, 0.0, dt)
+        delta = th / np.abs(slope)
+        ref[idx] += sign * n * th
+        # Refractory: keep the first crossing >= t_last + r, then every stride-th one.
+        if refractory_s > 0:
+            j0 = 1 + np.maximum(0.0, np.ceil((t_last[idx] + refractory_s - tau1) / delta - 1e-9))
+            j0 = np.minimum(j0, n + 1).astype(np.int64)
+            stride = np.maximum(1, np.ceil(refractory_s / delta - 1e-9)).astype(np.int64)
+        else:
+            j0, stride = np.ones_like(n), np.ones_like(n)
+        n_keep = np.where(j0 <= n, (n - j0) // stride + 1, 0)
+        has = n_keep > 0
+        if not has.any():
+            continue
+        last_j = j0 + (n_keep - 1) * stride
+        t_last[idx[has]] = (tau1 + (last_j - 1) * delta)[has]
+        # Expand pixels to events: the m-th kept event of a pixel is crossing j0 + m * stride.
+        rep = np.repeat(np.arange(idx.size), n_keep)
+        m = np.arange(rep.size) - np.repeat(np.cumsum(n_keep) - n_keep, n_keep)
+        j = j0[rep] + m * stride[rep]
+        tt = np.rint((tau1[rep] + (j - 1) * delta[rep]) * 1e6).astype(np.int64)
+        order = np.argsort(tt, kind="stable")
+        out_t.append(tt[order])
+        out_i.append(idx[rep][order])
+        out_p.append(sign[rep][order].astype(np.int8))
+    if not out_t:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int8)
+    return np.concatenate(out_t), np.concatenate(out_i), np.concatenate(out_p)
+
+
+def background_activity(rate_hz: float, n_pixels: int, t0_s: float, t1_s: float,
+                        rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Poisson background-activity noise: uniform in time and over pixels, random polarity.
+
+    Returns:
+        ``t [E]`` int64 µs (sorted), ``pixel [E]`` int64, ``p [E]`` int8.
+    """
+    n = int(rng.poisson(max(rate_hz, 0.0) * n_pixels * max(t1_s - t0_s, 0.0)))
+    t = np.sort(rng.integers(int(round(t0_s * 1e6)), int(round(t1_s * 1e6)) + 1, size=n))
+    pix = rng.integers(0, n_pixels, size=n)
+    p = np.where(rng.random(n) < 0.5, 1, -1).astype(np.int8)
+    return t.astype(np.int64), pix.astype(np.int64), p
+
+
+def merge_sorted(*streams: tuple[np.ndarray, np.ndarray, np.ndarray]):
+    """Concatenate ``(t, pixel, p)`` triples and sort stably by time (earlier arguments first on ties)."""
+    t = np.concatenate([s[0] for s in streams])
+    order = np.argsort(t, kind="stable")
+    pix = np.concatenate([s[1] for s in streams])[order]
+    return t[order], pix, np.concatenate([s[2] for s in streams])[order]

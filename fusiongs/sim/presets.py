@@ -1,0 +1,119 @@
+"""Simulator scene presets: textured geometry (photographs on planes and boxes) and camera motion.
+
+World axes are OpenCV's (x right, y down, z forward); the camera starts near the origin looking
+along +z. Each preset differs in geometry, textures and motion:
+
+- ``boxes``: a photo wall, a gravel floor, three textured boxes and a tilted panel at different
+  depths; the camera orbits the middle of the scene (strong parallax).
+- ``wall``: a brick wall with photo posters and one panel standing in front; a sideways pan with
+  little rotation (nearly planar scene).
+- ``corridor``: a corridor (textured walls, floor, ceiling, an end wall) with a box; the camera
+  dollies forward while turning slightly (looming motion, depth from 1 to 12 m).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from fusiongs.errors import InputError
+from fusiongs.sim.motion import Motion
+from fusiongs.sim.raycast import Quad, World, box_quads, lambert_gain
+from fusiongs.sim.textures import load_photo
+
+LIGHT = (0.35, -0.8, -0.5)  # direction towards the light (from above, left, behind the camera)
+
+
+@dataclass(frozen=True, eq=False)
+class Preset:
+    """A scene to simulate: ``world`` seen along ``motion`` with a ``hfov_deg`` lens."""
+
+    world: World
+    motion: Motion
+    hfov_deg: float = 62.0
+
+
+def _plane(origin, edge_u, edge_v, texture: int, intensity: float = 1.0, crop=(0.0, 0.0, 1.0, 1.0)) -> Quad:
+    n = np.cross(edge_u, edge_v)
+    return Quad(tuple(map(float, origin)), tuple(map(float, edge_u)), tuple(map(float, edge_v)),
+                texture, crop, lambert_gain(n, LIGHT, intensity=intensity))
+
+
+def _box(center, size, texture: int, intensity: float = 1.0) -> list[Quad]:
+    normals = [(-1, 0, 0), (1, 0, 0), (0, -1, 0), (0, 1, 0), (0, 0, -1), (0, 0, 1)]
+    gains = tuple(lambert_gain(n, LIGHT, intensity=intensity) for n in normals)
+    return box_quads(center, size, texture, gains)
+
+
+def boxes() -> Preset:
+    """Sideways arc past three boxes and a tilted panel in front of a photo wall."""
+    tex = (load_photo("astronaut"), load_photo("gravel", (0.85, 0.7, 0.5)), load_photo("coffee"),
+           load_photo("chelsea"), load_photo("rocket"), load_photo("immunohistochemistry"))
+    quads = [
+        _plane((-13, -8.5, 9), (26, 0, 0), (0, 17, 0), 0),  # back wall (z = 9)
+        _plane((-13, 1.5, -1), (26, 0, 0), (0, 0, 10), 1),  # floor (y = 1.5)
+        *_box((-1.4, 0.85, 4.2), (1.1, 1.3, 1.1), 2),
+        *_box((1.5, 0.6, 5.6), (1.2, 1.8, 1.2), 3),
+        *_box((0.2, 1.15, 3.0), (0.7, 0.7, 0.7), 4),
+        _plane((-1.0, -2.0, 7.0), (2.0, 0, 0.7), (0.2, 1.5, 0), 5),  # tilted panel
+    ]
+    motion = Motion(target=(0.0, 1.2, 20.0), radius=(20.0, 20.0), azimuth_deg=(-11.0, 11.0),
+                    height=(-1.3, -1.1), bob=0.1, look_shift=(0.0, 1.0, 0.0),
+                    shake_pos=0.004, shake_rot_deg=0.25)
+    return Preset(World(tuple(quads), tex), motion, 62.0)
+
+
+def wall() -> Preset:
+    """Sideways pan in front of a brick wall with posters."""
+    tex = (load_photo("brick", (0.9, 0.55, 0.4)), load_photo("astronaut"), load_photo("rocket"),
+           load_photo("colorwheel"), load_photo("hubble_deep_field"), load_photo("chelsea"))
+    quads = [
+        _plane((-2.3, -1.7, 4.97), (2.0, 0, 0), (0, 2.0, 0), 1),  # posters just in front of the wall
+        _plane((0.6, -1.5, 4.97), (2.4, 0, 0), (0, 1.6, 0), 2),
+        _plane((-0.5, 0.6, 4.97), (1.2, 0, 0), (0, 1.2, 0), 3),
+        _plane((1.0, 0.4, 4.97), (1.5, 0, 0), (0, 1.4, 0), 4),
+        _plane((-8, -5, 5.0), (16, 0, 0), (0, 10, 0), 0),  # wall
+        _plane((-1.6, -0.2, 3.2), (1.0, 0, -0.3), (0, 1.3, 0), 5),  # a panel standing in front
+    ]
+    motion = Motion(target=(0.0, 0.0, 60.0), radius=(60.0, 60.0), azimuth_deg=(-2.6, 2.6),
+                    height=(0.05, -0.05), shake_pos=0.004, shake_rot_deg=0.3)
+    return Preset(World(tuple(quads), tex), motion, 62.0)
+
+
+def corridor() -> Preset:
+    """Dolly forward down a corridor while turning a little."""
+    names = ("brick", "coffee", "gravel", "grass", "hubble_deep_field", "chelsea", "immunohistochemistry",
+             "rocket", "astronaut")
+    tints = {"brick": (0.8, 0.75, 0.7), "gravel": (0.6, 0.6, 0.65), "grass": (0.9, 0.95, 0.8)}
+    tex = tuple(load_photo(n, tints.get(n, (1.0, 1.0, 1.0))) for n in names)
+    seg, n_seg = 4.5, 3  # corridor of three 4.5 m segments, 3 m wide, 2.7 m high
+    quads = []
+    for i in range(n_seg):
+        z0, z1 = i * seg, (i + 1) * seg
+        quads += [
+            _plane((-1.5, -1.5, z0), (0, 0, seg), (0, 2.7, 0), 0),  # left wall (x = -1.5)
+            _plane((1.5, -1.5, z1), (0, 0, -seg), (0, 2.7, 0), (1, 7, 5)[i]),  # right wall
+            _plane((-1.5, 1.2, z0), (3.0, 0, 0), (0, 0, seg), 2),  # floor (y = 1.2)
+            _plane((-1.5, -1.5, z1), (3.0, 0, 0), (0, 0, -seg), 3),  # ceiling (y = -1.5)
+        ]
+    quads += [
+        _plane((-1.5, -1.5, seg * n_seg), (3.0, 0, 0), (0, 2.7, 0), 4),  # end wall
+        _plane((-1.49, -0.9, 6.0), (0, 0, 1.8), (0, 1.2, 0), 8, 1.1),  # poster on the left wall
+        *_box((0.6, 0.75, 7.5), (0.8, 0.9, 0.8), 6),
+    ]
+    motion = Motion(target=(0.0, 0.0, 40.0), radius=(39.8, 36.3), azimuth_deg=(0.0, 0.0),
+                    height=(-0.1, 0.0), bob=0.05, look_shift=(18.0, -3.0, 0.0),
+                    shake_pos=0.005, shake_rot_deg=0.35)
+    return Preset(World(tuple(quads), tex), motion, 66.0)
+
+
+PRESETS: dict[str, Callable[[], Preset]] = {"boxes": boxes, "wall": wall, "corridor": corridor}
+
+
+def get_preset(name: str) -> Preset:
+    """Build a preset by name (``PRESETS`` keys); unknown names raise :class:`InputError`."""
+    if name not in PRESETS:
+        raise InputError("simulate", "preset", f"one of {', '.join(PRESETS)}", repr(name))
+    return PRESETS[name]()

@@ -1,0 +1,115 @@
+"""End to end: ``fusiongs deblur`` on a tiny simulated scene writes every output; resume; errors."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from fusiongs.cli import main
+from fusiongs.frames.image_io import read_image
+from fusiongs.io import load_scene
+from fusiongs.scene.ply import load_ply
+from fusiongs.sim.simulate import SimConfig, run_simulation
+from fusiongs.sim.write import write_simulated_scene
+from fusiongs.train.checkpoint import load_checkpoint
+from fusiongs.train.config import load_config
+from fusiongs.train.settings import DeblurConfig
+
+TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
+        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
+        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
+
+
+@pytest.fixture(scope="module")
+def tiny_scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("scene")
+    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.12, frames=2, exposure=0.03,
+                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    return root
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY]) == 0
+    return out
+
+
+def test_deblur_writes_every_output(tiny_scene, tiny_run):
+    scene = load_scene(tiny_scene)
+    h, w = scene.camera.height, scene.camera.width
+    for r in scene.renders:
+        img = read_image(tiny_run / "renders" / f"{r.name}.png")
+        assert img.shape == (h, w, 3)
+    for name in scene.frames.names:
+        assert read_image(tiny_run / "deblurred" / f"{name}.png").shape == (h, w, 3)
+    assert (tiny_run / "deblurred.mp4").stat().st_size > 0
+    model = load_ply(tiny_run / "model.ply")
+    assert model.n > 0 and torch.isfinite(model.means).all()
+    assert load_checkpoint(tiny_run / "checkpoint.pt")["iteration"] == 10
+    cfg = load_config(DeblurConfig, tiny_run / "config.yaml")
+    assert cfg.optim.iterations == 10 and cfg.init.n_points == 300
+    theta = json.loads((tiny_run / "thresholds.json").read_text())
+    assert len(theta["theta_pos"]) == 1 and theta["theta_pos"][0] > 0
+    metrics = json.loads((tiny_run / "metrics.json").read_text())
+    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "blurry", "edi"}
+    assert "novel" in metrics["mean"]
+    assert read_image(tiny_run / "report.png").shape[1] > 100
+    assert not list(tiny_run.rglob("*.tmp*")), "no temporary files are left behind"
+
+
+def test_resume_continues_from_the_checkpoint(tiny_scene, tiny_run, tmp_path):
+    out = tmp_path / "run"
+    args = ["deblur", str(tiny_scene), "-o", str(out), *TINY]
+    assert main(args[:-1] + ["optim.iterations=6"] + args[-1:]) == 0
+    first = load_checkpoint(out / "checkpoint.pt")
+    assert first["iteration"] == 6
+    assert main(args + ["--resume"]) == 0
+    second = load_checkpoint(out / "checkpoint.pt")
+    assert second["iteration"] == 10
+    assert len(second["history"]["iteration"]) == 10  # 6 recorded before, 4 after resuming
+
+
+def test_render_command_renders_requested_instants(tiny_run, tmp_path):
+    assert main(["render", str(tiny_run), "--t", "0.03", "0.06", "-o", str(tmp_path)]) == 0
+    files = sorted(tmp_path.glob("t_*.png"))
+    assert len(files) == 2
+    a, b = read_image(files[0]), read_image(files[1])
+    assert a.shape == b.shape and not np.array_equal(a, b)
+
+
+def test_eval_command_reads_run_and_truth(tiny_scene, tiny_run, capsys):
+    assert main(["eval", str(tiny_run), "--gt", str(tiny_scene / "gt")]) == 0
+    out = capsys.readouterr().out
+    assert "fusiongs" in out and "deblur" in out
+
+
+@pytest.mark.parametrize("bad, expected", [
+    (["events.nope=1"], "events.nope"),
+    (["events.loss=huber"], "events.loss"),
+    (["optim.iterations=many"], "optim.iterations"),
+])
+def test_bad_config_is_one_line_and_exit_2(tiny_scene, tmp_path, capsys, bad, expected):
+    assert main(["deblur", str(tiny_scene), "-o", str(tmp_path), *bad]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and expected in err[0]
+
+
+def test_missing_scene_is_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["deblur", str(tmp_path / "absent"), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scene.json" in err[0]
+
+
+def test_shipped_default_config_equals_builtin_defaults():
+    from fusiongs.configs import config_file
+
+    assert load_config(DeblurConfig, config_file("deblur.yaml")) == DeblurConfig()
+    fast = load_config(DeblurConfig, config_file("deblur_fast.yaml"))
+    assert dataclasses.replace(fast) != DeblurConfig()
