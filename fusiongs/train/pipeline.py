@@ -54,7 +54,10 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     methods = {"fusiongs": ours, **baseline_images(scene)}
     result = compare_methods(methods, gt)
     result["seconds"] = tr.history.seconds
+    result["render_seconds"] = tr.history.render_seconds
+    result["backward_seconds"] = tr.history.backward_seconds
     result["iterations"] = tr.iteration
+    result["n_gaussians"] = tr.state.model.n
     write_text(out / "metrics.json", json.dumps(result, indent=2) + "\n")
     write_report(out / "report.png", result, tr.history, methods, gt)
     return result
@@ -72,8 +75,10 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     tr = train(scene, cfg, out, resume=resume)
     images = write_outputs(tr, scene, out)
     n_it = max(tr.iteration, 1)
-    log(f"trained {tr.iteration} iterations in {tr.history.seconds:.1f} s "
-        f"({tr.history.seconds / n_it:.3f} s/it), {tr.state.model.n} Gaussians")
+    h = tr.history
+    log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "
+        f"render forward {h.render_seconds / max(h.seconds, 1e-9):.0%}, backward "
+        f"{h.backward_seconds / max(h.seconds, 1e-9):.0%}), {tr.state.model.n} Gaussians")
     result = None
     if scene.root is not None and (scene.root / "gt").is_dir():
         result = evaluate_outputs(tr, scene, images, out, scene.root / "gt")

@@ -8,6 +8,7 @@ one rasteriser call; the blur loss uses the first N renders, the event windows p
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 
 import torch
@@ -119,8 +120,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                                    min(cfg.events.min_window, data.frame_interval))
         times.append(free.reshape(-1))
     t_all = torch.cat(times)
+    t0 = time.perf_counter()
     lin, _, meta = state.render(data.camera, t_all, cfg.backend)
-    parts: dict[str, float] = {}
+    parts: dict[str, float] = {"render_s": time.perf_counter() - t0}
     loss = lin.new_zeros(())
     if has_frames:
         pred = predict_blurry(lin[:n], state.log_gain[frame], data.response,

@@ -43,7 +43,8 @@ class History:
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
     seconds: float = 0.0
-    render_seconds: float = 0.0
+    render_seconds: float = 0.0      # rasteriser forward passes
+    backward_seconds: float = 0.0    # backward through losses and rasteriser
 
 
 @dataclass
@@ -170,7 +171,10 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             res = training_step(state, data, cfg, frame, lam_ev, gen)
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg)
+            t_back = time.perf_counter()
             loss.backward()
+            history.backward_seconds += time.perf_counter() - t_back
+            history.render_seconds += res.parts["render_s"]
             _optimise(opts, cfg, it)
             if cfg.densify.enabled and state.model.n < cfg.densify.max_gaussians:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)

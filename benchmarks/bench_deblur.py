@@ -1,0 +1,121 @@
+"""Quality and speed of ``fusiongs deblur`` on simulated scenes, with blurry input and EDI beside it.
+
+Scenes come from ``fusiongs simulate`` (173x130, 12 frames over 1 s, ~8 million events by default;
+grey and RGGB events); each is deblurred with a config, and the table prints mean deblur-view and
+novel-view PSNR / SSIM for the blurry input, EDI (threshold from consecutive-frame consistency) and
+fusiongs, all measured in the same run, plus seconds per iteration and the share spent rendering.
+``--ablation`` adds variants on the first scene (and the first colour scene for mask vs demosaic).
+
+    PYTHONPATH=. python benchmarks/bench_deblur.py --presets boxes,wall --seeds 0,1 --cfa none,RGGB
+    PYTHONPATH=. python benchmarks/bench_deblur.py --ablation --presets boxes --seeds 0
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch  # noqa: E402
+
+from fusiongs.sim.simulate import SimConfig, run_simulation  # noqa: E402
+from fusiongs.sim.write import write_simulated_scene  # noqa: E402
+from fusiongs.train.pipeline import run_deblur  # noqa: E402
+
+ABLATIONS = {
+    "no events": ["events.enabled=false"],
+    "fixed theta": ["threshold.learn=false"],
+    "full (mse)": [],
+    "band": ["events.loss=band"],
+    "pvc": ["events.loss=pvc"],
+    "N=1": ["blur.n_samples=1"],
+    "N=5": ["blur.n_samples=5"],
+}
+COLOUR_ABLATIONS = {"mask": ["events.colour_mode=mask"], "demosaic": ["events.colour_mode=demosaic"]}
+
+
+def scene_for(root: Path, preset: str, seed: int, cfa: str | None, args) -> Path:
+    name = f"{preset}_s{seed}_{cfa or 'grey'}_{args.size}"
+    path = root / "scenes" / name
+    if not (path / "scene.json").is_file():
+        w, h = (int(v) for v in args.size.split("x"))
+        cfg = SimConfig(preset=preset, width=w, height=h, duration=1.0, frames=12, exposure=0.06,
+                        cfa=cfa, seed=seed, events_target=args.events or None)
+        res = run_simulation(cfg)
+        write_simulated_scene(res.scene, res.gt, path, stats=res.stats, overwrite=True)
+    return path
+
+
+def run_one(scene: Path, out: Path, config: str, overrides: list[str]) -> dict:
+    t0 = time.perf_counter()
+    result = run_deblur(scene, out, config=config, overrides=["output.progress=false", *overrides],
+                        log=lambda *_: None)
+    result["wall_seconds"] = time.perf_counter() - t0
+    return result
+
+
+def row(label: str, r: dict) -> str:
+    d, n = r["mean"]["deblur"], r["mean"].get("novel", {})
+    f = d["fusiongs"]
+    edi = d.get("edi", {"psnr": float("nan"), "ssim": float("nan")})
+    nov = n.get("fusiongs", {"psnr": float("nan"), "ssim": float("nan")})
+    s_it = r["seconds"] / max(r["iterations"], 1)
+    share = r["render_seconds"] / max(r["seconds"], 1e-9)
+    back = r["backward_seconds"] / max(r["seconds"], 1e-9)
+    return (f"| {label} | {d['blurry']['psnr']:.2f} / {d['blurry']['ssim']:.3f} | {edi['psnr']:.2f} / "
+            f"{edi['ssim']:.3f} | {f['psnr']:.2f} / {f['ssim']:.3f} | {nov['psnr']:.2f} / {nov['ssim']:.3f} | "
+            f"{f['psnr'] - edi['psnr']:+.2f} | {f['psnr'] - d['blurry']['psnr']:+.2f} | "
+            f"{nov['psnr'] - f['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | {r['seconds'] / 60:.1f} |")
+
+
+HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs deblur | fusiongs novel | vs EDI | vs blurry | "
+          "novel-deblur | s/it | render fwd/bwd share | train min |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", default="bench_out/deblur")
+    p.add_argument("--config", default="configs/deblur.yaml")
+    p.add_argument("--presets", default="boxes,wall")
+    p.add_argument("--seeds", default="0,1")
+    p.add_argument("--cfa", default="none,RGGB")
+    p.add_argument("--size", default="173x130")
+    p.add_argument("--events", type=int, default=8_000_000, help="events target (0: nominal thresholds)")
+    p.add_argument("--ablation", action="store_true")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("overrides", nargs="*", help="config overrides for every run")
+    args = p.parse_args(argv)
+    torch.set_num_threads(args.threads)
+    root = Path(args.out)
+    cfas = [None if c.lower() == "none" else c for c in args.cfa.split(",")]
+    runs = [(pr, int(s), c) for pr in args.presets.split(",") for s in args.seeds.split(",") for c in cfas]
+    print(f"config {args.config} {' '.join(args.overrides)}; torch threads {torch.get_num_threads()}")
+    print(HEADER)
+    results = {}
+    for preset, seed, cfa in runs:
+        scene = scene_for(root, preset, seed, cfa, args)
+        label = f"{preset} s{seed} {cfa or 'grey'}"
+        r = run_one(scene, root / "runs" / scene.name, args.config, args.overrides)
+        results[label] = r
+        print(row(label, r), flush=True)
+        if args.ablation:
+            variants = dict(ABLATIONS)
+            if cfa is not None:
+                variants = {k: v for k, v in COLOUR_ABLATIONS.items()}
+            for name, ov in variants.items():
+                rr = run_one(scene, root / "runs" / f"{scene.name}_{name.replace(' ', '_')}",
+                             args.config, [*args.overrides, *ov])
+                results[f"{label} {name}"] = rr
+                print(row(f"{label} {name}", rr), flush=True)
+    (root / "results.json").write_text(json.dumps(results, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
