@@ -8,8 +8,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from fusiongs.atomic import atomic_path
 from fusiongs.errors import FusionGSError
-from fusiongs.io.atomic import atomic_path
 
 
 def write_mp4(path: str | Path, frames: Sequence[np.ndarray], fps: float) -> None:

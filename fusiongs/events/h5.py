@@ -7,12 +7,12 @@ Native layout: group ``events`` with 1-D datasets ``t`` (int64 µs), ``x``/``y``
 
 from __future__ import annotations
 
-import os
 from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from fusiongs.atomic import atomic_path
 from fusiongs.errors import InputError
 from fusiongs.events.stream import EventStream
 
@@ -146,20 +146,14 @@ def write_events_h5(stream: EventStream, path: str | Path, *, compression: str |
     import h5py
 
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     kw = {} if compression is None else {"compression": compression, "chunks": (1 << 18,)}
     if compression is not None and len(stream) < (1 << 18):
         kw["chunks"] = True
-    try:
-        with h5py.File(tmp, "w") as f:
-            g = f.create_group("events")
-            g.create_dataset("t", data=np.asarray(stream.t, np.int64), **kw)
-            g.create_dataset("x", data=np.asarray(stream.x, np.uint16), **kw)
-            g.create_dataset("y", data=np.asarray(stream.y, np.uint16), **kw)
-            g.create_dataset("p", data=np.asarray(stream.p, np.int8), **kw)
-            g.attrs["width"] = np.int64(stream.width)
-            g.attrs["height"] = np.int64(stream.height)
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as f:
+        g = f.create_group("events")
+        g.create_dataset("t", data=np.asarray(stream.t, np.int64), **kw)
+        g.create_dataset("x", data=np.asarray(stream.x, np.uint16), **kw)
+        g.create_dataset("y", data=np.asarray(stream.y, np.uint16), **kw)
+        g.create_dataset("p", data=np.asarray(stream.p, np.int8), **kw)
+        g.attrs["width"] = np.int64(stream.width)
+        g.attrs["height"] = np.int64(stream.height)

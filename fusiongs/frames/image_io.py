@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from fusiongs.atomic import write_bytes
 from fusiongs.errors import InputError, MissingDependencyError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
@@ -77,21 +76,7 @@ def write_png(path: str | Path, img: np.ndarray, bits: int = 8) -> None:
     ok, buf = cv2.imencode(".png", q)
     if not ok:
         raise InputError(path, "image", "an image OpenCV can encode as PNG", q.shape)
-    atomic_write_bytes(path, buf.tobytes())
-
-
-def atomic_write_bytes(path: str | Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file in the same folder and a rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_bytes(path, buf.tobytes())
 
 
 def _open_raw(path: Path):

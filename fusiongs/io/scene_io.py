@@ -140,7 +140,7 @@ def save_scene(scene: Scene, path: str | Path, *, images_bits: int = 8) -> Path:
     Raises:
         InputError: duplicate frame names, a frame or event size that differs from the camera.
     """
-    from fusiongs.io.atomic import write_text
+    from fusiongs.atomic import write_text
 
     root = Path(path)
     root.mkdir(parents=True, exist_ok=True)

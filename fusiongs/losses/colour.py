@@ -17,17 +17,12 @@ column), G at (even, odd) and (odd, even), B at (odd, odd) (OpenCV ``COLOR_Bayer
 from __future__ import annotations
 
 import torch
-import torch.nn.functional as F
 
 from fusiongs.errors import InputError
-from fusiongs.events.cfa import cfa_channel_index
+from fusiongs.events.cfa import cfa_channel_index, demosaic
 
 #: Channel weights (R, G, B) of the colour event losses: the two greens of a Bayer cell count once.
 DEFAULT_CHANNEL_WEIGHTS = (0.4, 0.2, 0.4)
-
-# Bilinear interpolation kernels (applied as normalised convolutions, see bilinear_demosaic).
-_K_RB = ((0.25, 0.5, 0.25), (0.5, 1.0, 0.5), (0.25, 0.5, 0.25))
-_K_G = ((0.0, 0.25, 0.0), (0.25, 1.0, 0.25), (0.0, 0.25, 0.0))
 
 
 def cfa_index(pattern: str, height: int, width: int, device: torch.device | None = None) -> torch.Tensor:
@@ -50,7 +45,8 @@ def cfa_index(pattern: str, height: int, width: int, device: torch.device | None
 def bilinear_demosaic(mosaic: torch.Tensor, pattern: str) -> torch.Tensor:
     """Bilinear demosaic of float Bayer mosaics (differentiable, any sign).
 
-    Each channel's samples are spread with the standard bilinear kernels (``[1 2 1]/4`` outer
+    The torch path of :func:`fusiongs.events.cfa.demosaic` (``method="bilinear"``), channels
+    first. Each channel's samples are spread with the standard bilinear kernels (``[1 2 1]/4`` outer
     product for R and B, the cross ``[0 1 0; 1 4 1; 0 1 0]/4`` for G) as a *normalised*
     convolution ``conv(m * x) / conv(m)`` with zero padding. In the interior ``conv(m)`` is 1, so
     it equals the classic bilinear demosaic (measured samples kept, constants and linear ramps
@@ -66,15 +62,7 @@ def bilinear_demosaic(mosaic: torch.Tensor, pattern: str) -> torch.Tensor:
     """
     if mosaic.ndim < 2 or not mosaic.is_floating_point():
         raise InputError("bilinear_demosaic", "mosaic", "a float tensor [..., H, W]", mosaic.dtype)
-    h, w = mosaic.shape[-2:]
-    lead = mosaic.shape[:-2]
-    x = mosaic.reshape(-1, 1, h, w)
-    idx = cfa_index(pattern, h, w, mosaic.device)
-    masks = (idx[None] == torch.arange(3, device=mosaic.device)[:, None, None]).to(mosaic.dtype)
-    kern = torch.tensor((_K_RB, _K_G, _K_RB), dtype=mosaic.dtype, device=mosaic.device)[:, None]
-    num = F.conv2d(x * masks[None], kern, padding=1, groups=3)  # [M, 3, H, W]
-    den = F.conv2d(masks[None], kern, padding=1, groups=3)  # [1, 3, H, W]
-    return (num / den).reshape(*lead, 3, h, w)
+    return demosaic(mosaic, pattern, "bilinear").movedim(-1, -3)
 
 
 def demosaic_event_maps(signed_maps: torch.Tensor, pattern: str) -> torch.Tensor:

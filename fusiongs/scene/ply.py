@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fusiongs.atomic import atomic_path
 from fusiongs.errors import InputError
-from fusiongs.io.atomic import atomic_path
 from fusiongs.scene.gaussians import GaussianModel
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",

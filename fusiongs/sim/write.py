@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from fusiongs.atomic import write_text
 from fusiongs.errors import InputError
 from fusiongs.frames.image_io import write_png
 from fusiongs.io import save_scene
-from fusiongs.io.atomic import write_text
 from fusiongs.io.scene import Scene
 
 

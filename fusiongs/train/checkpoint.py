@@ -7,8 +7,8 @@ from typing import Any
 
 import torch
 
+from fusiongs.atomic import atomic_path
 from fusiongs.errors import InputError
-from fusiongs.io.atomic import atomic_path
 
 FORMAT = "fusiongs-checkpoint"
 VERSION = 1

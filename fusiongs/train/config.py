@@ -13,9 +13,7 @@ dataclasses. A float field also accepts an int, and a string spelling a number (
 from __future__ import annotations
 
 import dataclasses
-import os
 import re
-import tempfile
 import types
 import typing
 from collections.abc import Iterable, Mapping
@@ -24,6 +22,7 @@ from typing import Any, Literal, TypeVar
 
 import yaml
 
+from fusiongs.atomic import write_text
 from fusiongs.errors import ConfigError
 
 T = TypeVar("T")
@@ -239,13 +238,5 @@ def save_config(cfg: Any, path: str | Path) -> Path:
         The written path.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(to_yaml(cfg))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(path, to_yaml(cfg))
     return path

@@ -39,6 +39,7 @@ class TrainData:
     cfa_index: torch.Tensor | None
     t_range: tuple[float, float]
     frame_interval: float
+    edi: torch.Tensor | None = None  # [F, H, W, 3] linear EDI images for the prior, or None
 
     @property
     def n_frames(self) -> int:
@@ -49,6 +50,16 @@ class TrainData:
         assert self.events is not None
         c = self.events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
         return torch.from_numpy(np.ascontiguousarray(c)).to(device=device, dtype=torch.float32)
+
+
+def edi_images(scene: Scene, theta: float, device: torch.device) -> torch.Tensor:
+    """``[F, H, W, 3]`` linear EDI images of the frames (θ estimated when ``theta`` is 0)."""
+    from fusiongs.eval.edi import edi_scene
+
+    e = edi_scene(scene, theta=theta or None)
+    if e.shape[-1] == 1:
+        e = np.repeat(e, 3, axis=-1)
+    return torch.from_numpy(np.clip(e, 0.0, None).astype(np.float32)).to(device)
 
 
 def prepare_data(scene: Scene, device: torch.device, use_events: bool) -> TrainData:

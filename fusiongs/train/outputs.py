@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from fusiongs.atomic import write_text
 from fusiongs.frames.image_io import read_image, write_png
 from fusiongs.frames.response import linear_to_srgb, response_to_linear
-from fusiongs.io.atomic import write_text
 from fusiongs.io.scene import Scene
 from fusiongs.scene.ply import save_ply
 from fusiongs.train.config import save_config

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from fusiongs.atomic import write_text
 from fusiongs.eval.evaluate import compare_methods, format_table
 from fusiongs.frames.response import linear_to_srgb
-from fusiongs.io.atomic import write_text
 from fusiongs.io.scene import Scene
 from fusiongs.io.scene_io import load_scene
 from fusiongs.train.config import load_config

@@ -55,6 +55,13 @@ class ThresholdSettings:
 
 
 @dataclass
+class PriorSettings:
+    edi_weight: float = 0.0          # weight of L1(mid-exposure render, EDI image) (DiET-GS-style prior)
+    edi_until: int = 0               # iterations the EDI prior is on (weight decays linearly to 0)
+    edi_theta: float = 0.0           # θ of the EDI images; 0 = estimated from consecutive frames
+
+
+@dataclass
 class OptimSettings:
     iterations: int = 3000
     lr_means: float = 1.6e-4         # times the scene extent
@@ -100,6 +107,7 @@ class DeblurConfig:
     blur: BlurSettings = field(default_factory=BlurSettings)
     events: EventSettings = field(default_factory=EventSettings)
     threshold: ThresholdSettings = field(default_factory=ThresholdSettings)
+    priors: PriorSettings = field(default_factory=PriorSettings)
     optim: OptimSettings = field(default_factory=OptimSettings)
     densify: DensifySettings = field(default_factory=DensifySettings)
     output: OutputSettings = field(default_factory=OutputSettings)

@@ -24,6 +24,7 @@ from fusiongs.losses.event import (
     sample_event_pixels,
     select_channel,
 )
+from fusiongs.losses.priors import edi_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.data import TrainData
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
@@ -99,13 +100,22 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     return event_loss_pvc(d, d_gt, th_p, th_n, kind="band", beta=ev.beta, channel_weights=weights)
 
 
+def edi_prior_weight(cfg: DeblurConfig, it: int) -> float:
+    """EDI prior weight: ``edi_weight`` decaying linearly to 0 at ``edi_until`` (METHOD.md §3)."""
+    p = cfg.priors
+    if p.edi_weight <= 0 or it >= p.edi_until:
+        return 0.0
+    return p.edi_weight * (1.0 - it / p.edi_until)
+
+
 def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
-                  lam_ev: float, gen: torch.Generator) -> StepResult:
+                  lam_ev: float, gen: torch.Generator, it: int = 0) -> StepResult:
     """Render and compute ``L_blur + λ_ev · L_ev`` for one frame (METHOD.md §3).
 
     Args:
         frame: index of the frame whose exposure is rendered (ignored without frames).
         lam_ev: event weight now (0 during the warm-up: no event renders are made then).
+        it: the iteration (for the EDI prior's schedule).
     """
     n = cfg.blur.n_samples
     use_events = data.events is not None and lam_ev > 0
@@ -132,6 +142,11 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         parts["blur"] = float(l_blur.detach())
         mse = float(((pred.detach().clamp(0, 1) - data.targets[frame]) ** 2).mean())
         parts["psnr"] = 10.0 * math.log10(1.0 / max(mse, 1e-12))
+    lam_edi = edi_prior_weight(cfg, it)
+    if has_frames and data.edi is not None and lam_edi > 0 and n % 2 == 1:
+        l_edi = edi_prior_loss(lin[n // 2], data.edi[frame])
+        loss = loss + lam_edi * l_edi
+        parts["edi"] = float(l_edi.detach())
     if use_events:
         windows = []
         if has_frames and n >= 2 and cfg.events.windows_inside > 0:

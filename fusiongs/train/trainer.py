@@ -24,7 +24,7 @@ from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
-from fusiongs.train.data import TrainData, prepare_data
+from fusiongs.train.data import TrainData, edi_images, prepare_data
 from fusiongs.train.schedules import event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState, build_state, scene_extent
@@ -39,6 +39,7 @@ class History:
     loss: list[float] = field(default_factory=list)
     blur: list[float] = field(default_factory=list)
     event: list[float] = field(default_factory=list)
+    edi: list[float] = field(default_factory=list)
     theta_pos: list[list[float]] = field(default_factory=list)
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
@@ -140,6 +141,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
+    if cfg.priors.edi_weight > 0 and data.events is not None and data.n_frames:
+        data.edi = edi_images(scene, cfg.priors.edi_theta, device)
     trajectory = build_trajectory(scene, cfg, device)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device)
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
@@ -168,7 +171,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             frame = int(order[it % len(order)])
             lam_ev = event_weight(it, cfg.events.warmup, cfg.events.weight, cfg.events.ramp)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
-            res = training_step(state, data, cfg, frame, lam_ev, gen)
+            res = training_step(state, data, cfg, frame, lam_ev, gen, it)
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg)
             t_back = time.perf_counter()
@@ -228,6 +231,7 @@ def _record(h: History, it: int, loss: float, parts: dict[str, float], state: Fu
     h.loss.append(loss)
     h.blur.append(parts.get("blur", math.nan))
     h.event.append(parts.get("event", math.nan))
+    h.edi.append(parts.get("edi", math.nan))
     with torch.no_grad():
         tp, tn = state.threshold.theta()
     h.theta_pos.append([float(v) for v in tp.reshape(-1)])

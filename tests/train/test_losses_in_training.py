@@ -40,3 +40,23 @@ def test_events_disabled_trains_on_frames_only(colour_scene, tmp_path):
     tr = train(colour_scene, cfg, tmp_path)
     assert all(math.isnan(v) for v in tr.history.event)
     assert all(math.isfinite(v) for v in tr.history.blur)
+
+
+def test_edi_prior_weight_decays_to_zero_at_its_end():
+    from fusiongs.train.step import edi_prior_weight
+
+    cfg = resolve_config(None, ["priors.edi_weight=0.5", "priors.edi_until=100"])
+    assert edi_prior_weight(cfg, 0) == 0.5
+    assert edi_prior_weight(cfg, 50) == pytest.approx(0.25)
+    assert edi_prior_weight(cfg, 100) == 0.0 and edi_prior_weight(cfg, 1000) == 0.0
+    assert edi_prior_weight(resolve_config(None, []), 0) == 0.0  # off by default
+
+
+def test_edi_prior_is_used_while_on(colour_scene, tmp_path):
+    cfg = resolve_config(None, BASE + ["priors.edi_weight=1.0", "priors.edi_until=4",
+                                       "priors.edi_theta=0.2"])
+    tr = train(colour_scene, cfg, tmp_path)
+    assert tr.data.edi is not None and tr.data.edi.shape[-1] == 3
+    assert all(math.isfinite(v) for v in tr.history.loss)
+    assert all(math.isfinite(v) for v in tr.history.edi[:4])
+    assert all(math.isnan(v) for v in tr.history.edi[4:])

@@ -8,13 +8,13 @@ slow, obviously-correct specification the tests compare it with.
 
 from __future__ import annotations
 
-import os
 from decimal import Decimal, InvalidOperation
 from pathlib import Path
 
 import numba
 import numpy as np
 
+from fusiongs.atomic import write_bytes
 from fusiongs.errors import InputError
 from fusiongs.events.h5 import stream_from_file
 from fusiongs.events.stream import EventStream
@@ -236,15 +236,7 @@ def write_events_txt(stream: EventStream, path: str | Path, *, header: bool = Tr
         header: write the first line ``width height``.
     """
     path = Path(path)
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     body = _format_lines(np.asarray(stream.t, np.int64), np.asarray(stream.x, np.int64),
                          np.asarray(stream.y, np.int64), np.asarray(stream.p, np.int64))
-    try:
-        with open(tmp, "wb") as fh:
-            if header:
-                fh.write(f"{stream.width} {stream.height}\n".encode())
-            fh.write(body.tobytes())
-        os.replace(tmp, path)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
+    head = f"{stream.width} {stream.height}\n".encode() if header else b""
+    write_bytes(path, head + body.tobytes())
