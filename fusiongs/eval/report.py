@@ -106,12 +106,15 @@ def side_by_side(parts: Sequence[np.ndarray]) -> np.ndarray:
 def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[str, np.ndarray]],
                  gt: Mapping[str, np.ndarray], max_strips: int = 4) -> None:
     """``report.png``: mean table, loss / θ curves and picture strips (methods | truth)."""
+    from fusiongs.eval.metrics import affine_fit
     from fusiongs.frames.image_io import write_png
 
     rows = [["views", "method", "n", "PSNR", "SSIM"]]
-    for g, by in result["mean"].items():
-        for method, m in by.items():
-            rows.append([g, method, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
+    tables = [("", result)] + ([(" (affine fit)", result["affine_fit"])] if "affine_fit" in result else [])
+    for suffix, res in tables:
+        for g, by in res["mean"].items():
+            for method, m in by.items():
+                rows.append([g, method + suffix, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
     its = history.iteration
     loss = line_plot({"loss": list(zip(its, history.loss))}, "loss", log_y=True)
     th = {}
@@ -126,6 +129,8 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
     strips = []
     for name in views:
         cols = {f"{m} {name}": imgs[name] for m, imgs in methods.items() if name in imgs}
+        if "affine_fit" in result and name in methods.get("fusiongs", {}):
+            cols["affine fit"] = affine_fit(methods["fusiongs"][name], gt[name])
         cols["truth"] = gt[name]
         strips.append(picture_strip(cols))
     parts = [table_image(rows, 520), side_by_side([loss, theta])] + strips

@@ -118,6 +118,12 @@ class ContrastThreshold(nn.Module):
             s = s + (d[:, None, :] if (pixels is not None and d.ndim == 2) else d)
         return s
 
+    def scalar(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(theta_pos [C], theta_neg [C])`` without the field and drift (their means are pinned
+        to zero by :meth:`smoothness`, so this is the sensor's mean threshold)."""
+        th = torch.exp(self.log_theta)
+        return th[0], th[1]
+
     def theta(
         self,
         pixels: torch.Tensor | None = None,

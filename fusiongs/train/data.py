@@ -40,6 +40,8 @@ class TrainData:
     t_range: tuple[float, float]
     frame_interval: float
     edi: torch.Tensor | None = None  # [F, H, W, 3] linear EDI images for the prior, or None
+    hpf_times: torch.Tensor | None = None  # [G] float64 s: read-outs of the HPF intensity images
+    hpf: torch.Tensor | None = None  # [G, H, W, 1] HPF log-intensity images (event-only anchor)
 
     @property
     def n_frames(self) -> int:
@@ -60,6 +62,20 @@ def edi_images(scene: Scene, theta: float, device: torch.device) -> torch.Tensor
     if e.shape[-1] == 1:
         e = np.repeat(e, 3, axis=-1)
     return torch.from_numpy(np.clip(e, 0.0, None).astype(np.float32)).to(device)
+
+
+def hpf_images(events: EventStream, t_range: tuple[float, float], n: int, tau: float,
+               theta0: float, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """HPF intensity images at ``n`` instants over ``t_range`` (Event-3DGS's intensity anchor).
+
+    Returns:
+        ``(times [n] float64 s, images [n, H, W, 1] float32 log units)``.
+    """
+    from fusiongs.events.hpf import high_pass_filter
+
+    times = np.linspace(t_range[0], t_range[1], max(int(n), 2))
+    v = high_pass_filter(events, times * 1e6, tau=tau, contrast=theta0)
+    return torch.from_numpy(times), torch.from_numpy(v[..., None]).to(device)
 
 
 def prepare_data(scene: Scene, device: torch.device, use_events: bool) -> TrainData:

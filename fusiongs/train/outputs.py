@@ -41,7 +41,7 @@ def frames_srgb(scene: Scene) -> np.ndarray:
 def write_thresholds(state: FusionState, path: Path) -> dict:
     """``thresholds.json``: learned θ per polarity (and colour channel)."""
     with torch.no_grad():
-        tp, tn = state.threshold.theta()
+        tp, tn = state.threshold.scalar()
     names = ["grey"] if tp.numel() == 1 else ["R", "G", "B"]
     doc = {"channels": names, "theta_pos": [float(v) for v in tp.reshape(-1)],
            "theta_neg": [float(v) for v in tn.reshape(-1)]}

@@ -33,7 +33,11 @@ def restore_state(path: str | Path) -> tuple[FusionState, PinholeCamera, dict]:
                                 knot_spacing=tj["spacing"] or None, fit_iters=0)
         trajectory.load_state_dict(tj["state"])
         h, w = camera.height, camera.width
-        threshold = ContrastThreshold(channels=int(ckpt["threshold_channels"]), image_size=(h, w))
+        th = ckpt["config"]["threshold"]
+        threshold = ContrastThreshold(channels=int(ckpt["threshold_channels"]), image_size=(h, w),
+                                      grid=tuple(th["grid"]) if th.get("grid") else None,
+                                      time_knots=int(th.get("time_knots", 0)),
+                                      time_range=tuple(ckpt.get("threshold_time_range", (0.0, 1.0))))
         threshold.load_state_dict(ckpt["threshold"])
         state = FusionState(model, trajectory, threshold, int(ckpt["log_gain"].numel()), False)
         with torch.no_grad():

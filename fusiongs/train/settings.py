@@ -52,6 +52,9 @@ class ThresholdSettings:
     learn: bool = True               # learn θ after the warm-up
     lr: float = 0.001                # Adam learning rate of log θ (1e-2 drifts low: see RESULTS.md)
     regularise: float = 0.0          # weight of the pull toward the initial θ (event-only mode)
+    grid: tuple[int, int] | None = None  # (gh, gw) spatial θ field over the sensor; None = scalar
+    time_knots: int = 0              # knots of a slow θ drift over the recording (0 = none, else >= 2)
+    smoothness: float = 1.0          # weight of the field / drift smoothness regulariser
 
 
 @dataclass
@@ -59,6 +62,17 @@ class PriorSettings:
     edi_weight: float = 0.0          # weight of L1(mid-exposure render, EDI image) (DiET-GS-style prior)
     edi_until: int = 0               # iterations the EDI prior is on (weight decays linearly to 0)
     edi_theta: float = 0.0           # θ of the EDI images; 0 = estimated from consecutive frames
+
+
+@dataclass
+class EventOnlySettings:
+    """Used when the scene has no frames: ``α·L_ev + (1−α)·L_intensity`` (Event-3DGS)."""
+
+    alpha_final: float = 0.95        # α after the warm-up and ramp (0.9-0.99)
+    alpha_warmup: int = 300          # iterations with α = 0 (the intensity anchor only)
+    alpha_ramp: int = 300            # iterations of linear ramp of α
+    hpf_readouts: int = 200          # instants the HPF intensity image is precomputed at
+    intensity_tau: float = 0.05      # τ of the HPF intensity image (s)
 
 
 @dataclass
@@ -108,6 +122,7 @@ class DeblurConfig:
     events: EventSettings = field(default_factory=EventSettings)
     threshold: ThresholdSettings = field(default_factory=ThresholdSettings)
     priors: PriorSettings = field(default_factory=PriorSettings)
+    event_only: EventOnlySettings = field(default_factory=EventOnlySettings)
     optim: OptimSettings = field(default_factory=OptimSettings)
     densify: DensifySettings = field(default_factory=DensifySettings)
     output: OutputSettings = field(default_factory=OutputSettings)

@@ -68,6 +68,8 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
                                            cfg.init.depth_max, generator=gen,
                                            sh_degree=cfg.init.sh_degree, init_opacity=cfg.init.opacity)
     channels = 3 if data.cfa_index is not None else 1
-    threshold = ContrastThreshold(channels=channels, init=cfg.threshold.init,
-                                  image_size=(data.camera.height, data.camera.width))
+    th = cfg.threshold
+    threshold = ContrastThreshold(channels=channels, init=th.init, grid=th.grid,
+                                  image_size=(data.camera.height, data.camera.width),
+                                  time_knots=th.time_knots, time_range=data.t_range)
     return FusionState(model, trajectory, threshold, data.n_frames, cfg.blur.learn_gain).to(device)

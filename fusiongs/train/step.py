@@ -24,7 +24,7 @@ from fusiongs.losses.event import (
     sample_event_pixels,
     select_channel,
 )
-from fusiongs.losses.priors import edi_prior_loss
+from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.data import TrainData
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
@@ -72,16 +72,17 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     if ev.loss == "pvc":
         signed = _hpf_target(data, t_a, t_b, ev, cfg.threshold.init, device)
     th = state.threshold
+    t_mid = 0.5 * (t_a + t_b)  # for a drifting θ
     if data.cfa_index is None:  # grey sensor: I = w · L
         d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
-        th_p, th_n = th.theta()
+        th_p, th_n = th.theta(pix, t=t_mid)
         n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
         d_gt = signed.reshape(-1)[pix, None]
         weights = None
     elif ev.colour_mode == "mask":  # each pixel in its own CFA channel on the raw grid
         ch = data.cfa_index.reshape(-1)[pix]
         d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)
-        th_p, th_n = th.theta(pix, channel=ch)
+        th_p, th_n = th.theta(pix, t=t_mid, channel=ch)
         n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
         d_gt = signed.reshape(-1)[pix, None]
         weights = channel_weights_for(ch, ev.channel_weights)
@@ -91,7 +92,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
         flat = maps.reshape(3, -1, 3)[:, pix]  # [3, P, 3]
         n_pos, n_neg, d_gt = flat[0], flat[1], flat[2]
         d = delta_log(la, lb, "rgb", eps=ev.log_eps)
-        th_p, th_n = th.theta()
+        th_p, th_n = th.theta(pix, t=t_mid)
         weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device=device)
     if ev.loss == "mse":
         return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights)
@@ -108,26 +109,57 @@ def edi_prior_weight(cfg: DeblurConfig, it: int) -> float:
     return p.edi_weight * (1.0 - it / p.edi_until)
 
 
+def snap_to_readouts(windows: torch.Tensor, readouts: torch.Tensor, t_min: float
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Move each window ``[W, 2]`` so that it ends on its nearest read-out instant (same length).
+
+    Returns:
+        ``(windows [W, 2], readout index [W])``; starts are clamped to ``t_min``.
+    """
+    idx = torch.searchsorted(readouts, windows[:, 1].contiguous()).clamp(1, len(readouts) - 1)
+    left_closer = (windows[:, 1] - readouts[idx - 1]) < (readouts[idx] - windows[:, 1])
+    idx = torch.where(left_closer, idx - 1, idx)
+    t_b = readouts[idx]
+    t_a = (t_b - (windows[:, 1] - windows[:, 0])).clamp(min=t_min)
+    return torch.stack([t_a, t_b], dim=1), idx
+
+
+def own_channel(linear: torch.Tensor, data: TrainData, grey_weights) -> torch.Tensor:
+    """``[H, W, 1]``: what each event pixel sees of a linear render ``[H, W, 3]``."""
+    if data.cfa_index is None:
+        w = torch.tensor(grey_weights, dtype=linear.dtype, device=linear.device)
+        return (linear * w).sum(-1, keepdim=True)
+    return linear.gather(-1, data.cfa_index[..., None])
+
+
 def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
                   lam_ev: float, gen: torch.Generator, it: int = 0) -> StepResult:
-    """Render and compute ``L_blur + λ_ev · L_ev`` for one frame (METHOD.md §3).
+    """Render and compute the losses of one iteration (METHOD.md §3).
+
+    With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
+    (event-only mode): ``α · L_ev + (1 − α) · L_intensity`` on free windows, with ``lam_ev`` = α
+    and the HPF intensity image at each window's end as the anchor (Event-3DGS).
 
     Args:
         frame: index of the frame whose exposure is rendered (ignored without frames).
-        lam_ev: event weight now (0 during the warm-up: no event renders are made then).
+        lam_ev: event weight now (0 during the warm-up: no event renders are made then, except
+            in event-only mode).
         it: the iteration (for the EDI prior's schedule).
     """
     n = cfg.blur.n_samples
-    use_events = data.events is not None and lam_ev > 0
     has_frames = data.n_frames > 0
+    use_events = data.events is not None and (lam_ev > 0 or not has_frames)
     times = []
     if has_frames:
         s, e = data.exposures[frame]
         times.append(exposure_instants(s, e, n).to(torch.float64))
     free = torch.zeros(0, 2, dtype=torch.float64)
+    readout = None
     if use_events and cfg.events.windows_free > 0:
         free = sample_free_windows(cfg.events.windows_free, data.t_range, data.frame_interval, gen,
                                    min(cfg.events.min_window, data.frame_interval))
+        if data.hpf is not None:
+            free, readout = snap_to_readouts(free, data.hpf_times, data.t_range[0])
         times.append(free.reshape(-1))
     t_all = torch.cat(times)
     t0 = time.perf_counter()
@@ -155,8 +187,16 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         base = n if has_frames else 0
         windows += [(base + 2 * i, base + 2 * i + 1, float(a), float(b))
                     for i, (a, b) in enumerate(free)]
-        l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen)
-                   for j, k, ta, tb in windows) / max(len(windows), 1)
-        loss = loss + lam_ev * l_ev
-        parts["event"] = float(l_ev.detach())
+        if lam_ev > 0 and windows:
+            l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen)
+                       for j, k, ta, tb in windows) / len(windows)
+            loss = loss + lam_ev * l_ev
+            parts["event"] = float(l_ev.detach())
+        if readout is not None:
+            seen = [own_channel(lin[base + 2 * i + 1], data, cfg.events.grey_weights)
+                    for i in range(len(readout))]
+            l_int = sum(intensity_prior_loss(v, data.hpf[int(g)], cfg.events.log_eps)
+                        for v, g in zip(seen, readout)) / len(readout)
+            loss = loss + (1.0 - lam_ev) * l_int
+            parts["intensity"] = float(l_int.detach())
     return StepResult(loss=loss, parts=parts, meta=meta, renders=lin)

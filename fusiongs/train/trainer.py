@@ -24,8 +24,8 @@ from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
-from fusiongs.train.data import TrainData, edi_images, prepare_data
-from fusiongs.train.schedules import event_weight, log_linear_lr
+from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data
+from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState, build_state, scene_extent
 from fusiongs.train.step import training_step
@@ -110,6 +110,7 @@ def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Gen
                        "spacing": s.trajectory.spacing, "t": tr.poses.t, "c2w": tr.poses.c2w},
         "threshold": s.threshold.state_dict(),
         "threshold_channels": s.threshold.channels,
+        "threshold_time_range": s.threshold.time_range,
         "log_gain": s.log_gain.detach().clone(),
         "optimizers": {k: o.state_dict() for k, o in opts.items()},
         "history": asdict(tr.history),
@@ -143,6 +144,10 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     data = prepare_data(scene, device, cfg.events.enabled)
     if cfg.priors.edi_weight > 0 and data.events is not None and data.n_frames:
         data.edi = edi_images(scene, cfg.priors.edi_theta, device)
+    if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
+        eo = cfg.event_only
+        data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
+                                              eo.intensity_tau, cfg.threshold.init, device)
     trajectory = build_trajectory(scene, cfg, device)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device)
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
@@ -169,7 +174,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     try:
         for it in bar:
             frame = int(order[it % len(order)])
-            lam_ev = event_weight(it, cfg.events.warmup, cfg.events.weight, cfg.events.ramp)
+            lam_ev = _event_weight(cfg, data, it)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
             res = training_step(state, data, cfg, frame, lam_ev, gen, it)
             strategy.step_pre_backward(res.meta)
@@ -201,6 +206,14 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     return tr
 
 
+def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:
+    """λ_ev with frames; α of ``α·L_ev + (1−α)·L_intensity`` without them (event-only mode)."""
+    if data.n_frames == 0:
+        eo = cfg.event_only
+        return event_only_alpha(it, eo.alpha_warmup, eo.alpha_final, eo.alpha_ramp)
+    return event_weight(it, cfg.events.warmup, cfg.events.weight, cfg.events.ramp)
+
+
 def _schedule(state: FusionState, strategy: DensifyStrategy, opts, cfg: DeblurConfig, it: int,
               extent: float, lam_ev: float) -> None:
     """Learning rates, θ frozen during the warm-up, opacity reset off once events are on."""
@@ -212,9 +225,13 @@ def _schedule(state: FusionState, strategy: DensifyStrategy, opts, cfg: DeblurCo
 
 
 def _regularisers(state: FusionState, cfg: DeblurConfig) -> torch.Tensor:
+    """θ pulled toward its start (event-only mode) and the smoothness of a θ field / drift."""
+    total = state.log_gain.new_zeros(())
     if cfg.threshold.regularise > 0:
-        return cfg.threshold.regularise * state.threshold.regularisation()
-    return state.log_gain.new_zeros(())
+        total = total + cfg.threshold.regularise * state.threshold.regularisation()
+    if cfg.threshold.grid is not None or cfg.threshold.time_knots:
+        total = total + cfg.threshold.smoothness * state.threshold.smoothness()
+    return total
 
 
 def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int) -> None:
@@ -233,7 +250,7 @@ def _record(h: History, it: int, loss: float, parts: dict[str, float], state: Fu
     h.event.append(parts.get("event", math.nan))
     h.edi.append(parts.get("edi", math.nan))
     with torch.no_grad():
-        tp, tn = state.threshold.theta()
+        tp, tn = state.threshold.scalar()
     h.theta_pos.append([float(v) for v in tp.reshape(-1)])
     h.theta_neg.append([float(v) for v in tn.reshape(-1)])
     h.n_gaussians.append(state.model.n)
