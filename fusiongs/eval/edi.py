@@ -24,7 +24,7 @@ from fusiongs.errors import InputError
 from fusiongs.events.cfa import cfa_channel_index, demosaic
 from fusiongs.events.stream import EventStream
 
-THETA_GRID = tuple(np.round(np.geomspace(0.05, 0.6, 23), 4))
+THETA_GRID = tuple(np.round(np.geomspace(0.02, 0.8, 33), 4))
 
 
 def _thetas(theta) -> tuple[float, float]:
@@ -124,7 +124,7 @@ def estimate_theta(frame_linear: np.ndarray, events: EventStream, t_start: float
     Args:
         frame_linear: ``[H, W, C]`` blurry frame, linear.
         events, t_start, t_end, n_samples: as :func:`edi_deblur`.
-        grid: candidate thresholds (default 23 values geometrically spaced in [0.05, 0.6]).
+        grid: candidate thresholds (default 33 values geometrically spaced in [0.02, 0.8]).
 
     Returns:
         the best threshold of ``grid`` (one value for both polarities).

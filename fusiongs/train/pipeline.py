@@ -17,7 +17,6 @@ from fusiongs.train.config import load_config
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.trainer import Trained, train
 
-
 EVENT_ONLY_NOTE = ("event-only reconstruction: events fix log-intensity changes, not absolute "
                    "brightness or colour balance; renders are defined up to a per-channel scale and "
                    "offset, so metrics are also given after a per-channel affine fit")

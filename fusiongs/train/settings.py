@@ -48,7 +48,8 @@ class EventSettings:
 
 @dataclass
 class ThresholdSettings:
-    init: float = 0.22               # initial θ for both polarities
+    init: float = 0.22               # initial θ for both polarities (when not estimated)
+    estimate: bool = True            # start from the EDI consecutive-frame estimate (needs >= 2 frames)
     learn: bool = True               # learn θ after the warm-up
     lr: float = 0.001                # Adam learning rate of log θ (1e-2 drifts low: see RESULTS.md)
     regularise: float = 0.0          # weight of the pull toward the initial θ (event-only mode)

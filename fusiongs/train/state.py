@@ -55,8 +55,13 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
 
 
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
-                device: torch.device) -> FusionState:
-    """Initial state: random Gaussians in the frusta of the cameras at the frame times."""
+                device: torch.device, theta_init: float | None = None) -> FusionState:
+    """Initial state: random Gaussians in the frusta of the cameras at the frame times.
+
+    Args:
+        theta_init: starting contrast threshold; ``cfg.threshold.init`` when None.
+    """
+    theta_init = cfg.threshold.init if theta_init is None else theta_init
     gen = torch.Generator().manual_seed(cfg.seed)
     if data.n_frames:
         t_init = data.exposures.mean(dim=1)
@@ -69,7 +74,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
                                            sh_degree=cfg.init.sh_degree, init_opacity=cfg.init.opacity)
     channels = 3 if data.cfa_index is not None else 1
     th = cfg.threshold
-    threshold = ContrastThreshold(channels=channels, init=th.init, grid=th.grid,
+    threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,
                                   image_size=(data.camera.height, data.camera.width),
                                   time_knots=th.time_knots, time_range=data.t_range)
     return FusionState(model, trajectory, threshold, data.n_frames, cfg.blur.learn_gain).to(device)

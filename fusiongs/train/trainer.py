@@ -149,7 +149,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
                                               eo.intensity_tau, cfg.threshold.init, device)
     trajectory = build_trajectory(scene, cfg, device)
-    state = build_state(data, scene.poses.c2w, trajectory, cfg, device)
+    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, initial_theta(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
     start, history = 0, History()
     ckpt_path = out_dir / "checkpoint.pt"
@@ -204,6 +204,17 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     history.seconds += time.perf_counter() - t_begin
     save_checkpoint(ckpt_path, _payload(tr, opts, gen))
     return tr
+
+
+def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig) -> float:
+    """θ to start from: the EDI consecutive-frame estimate when enabled and possible, else the
+    configured ``threshold.init`` (METHOD.md §4-5)."""
+    if not (cfg.threshold.estimate and data.events is not None and data.n_frames >= 2):
+        return cfg.threshold.init
+    from fusiongs.eval.edi import estimate_theta_sequence
+
+    fs = scene.frames
+    return estimate_theta_sequence(fs.to_linear(), data.events, fs.t_start, fs.t_end)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

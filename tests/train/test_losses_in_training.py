@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+import torch
 
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.train.pipeline import resolve_config
@@ -60,3 +61,16 @@ def test_edi_prior_is_used_while_on(colour_scene, tmp_path):
     assert all(math.isfinite(v) for v in tr.history.loss)
     assert all(math.isfinite(v) for v in tr.history.edi[:4])
     assert all(math.isnan(v) for v in tr.history.edi[4:])
+
+
+def test_threshold_starts_from_the_edi_estimate_unless_disabled(colour_scene):
+    from fusiongs.eval.edi import estimate_theta_sequence
+    from fusiongs.train.data import prepare_data
+    from fusiongs.train.trainer import initial_theta
+
+    fs = colour_scene.frames
+    expected = estimate_theta_sequence(fs.to_linear(), colour_scene.events, fs.t_start, fs.t_end)
+    data = prepare_data(colour_scene, torch.device("cpu"), True)
+    assert initial_theta(colour_scene, data, resolve_config(None, [])) == expected
+    off = resolve_config(None, ["threshold.estimate=false", "threshold.init=0.3"])
+    assert initial_theta(colour_scene, data, off) == 0.3
