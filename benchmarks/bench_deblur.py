@@ -29,12 +29,13 @@ from fusiongs.train.pipeline import run_deblur  # noqa: E402
 
 ABLATIONS = {
     "no events": ["events.enabled=false"],
-    "fixed theta": ["threshold.learn=false"],
+    "fixed theta": ["threshold.learn=false", "threshold.estimate=false"],
     "full (mse)": [],
     "band": ["events.loss=band"],
     "pvc": ["events.loss=pvc"],
     "N=1": ["blur.n_samples=1"],
     "N=5": ["blur.n_samples=5"],
+    "N=9": ["blur.n_samples=9"],
 }
 COLOUR_ABLATIONS = {"mask": ["events.colour_mode=mask"], "demosaic": ["events.colour_mode=demosaic"]}
 
@@ -67,9 +68,10 @@ def row(label: str, r: dict) -> str:
     s_it = r["seconds"] / max(r["iterations"], 1)
     share = r["render_seconds"] / max(r["seconds"], 1e-9)
     back = r["backward_seconds"] / max(r["seconds"], 1e-9)
-    return (f"| {label} | {d['blurry']['psnr']:.2f} / {d['blurry']['ssim']:.3f} | {edi['psnr']:.2f} / "
-            f"{edi['ssim']:.3f} | {f['psnr']:.2f} / {f['ssim']:.3f} | {nov['psnr']:.2f} / {nov['ssim']:.3f} | "
-            f"{f['psnr'] - edi['psnr']:+.2f} | {f['psnr'] - d['blurry']['psnr']:+.2f} | "
+    b = d["blurry"]
+    return (f"| {label} | {b['psnr']:.2f} / {b['ssim']:.3f} | {edi['psnr']:.2f} / {edi['ssim']:.3f} | "
+            f"{f['psnr']:.2f} / {f['ssim']:.3f} | {nov['psnr']:.2f} / {nov['ssim']:.3f} | "
+            f"{f['psnr'] - edi['psnr']:+.2f} | {f['psnr'] - b['psnr']:+.2f} | "
             f"{nov['psnr'] - f['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | {r['seconds'] / 60:.1f} |")
 
 
