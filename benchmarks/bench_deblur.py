@@ -72,7 +72,8 @@ def row(label: str, r: dict) -> str:
     return (f"| {label} | {b['psnr']:.2f} / {b['ssim']:.3f} | {edi['psnr']:.2f} / {edi['ssim']:.3f} | "
             f"{f['psnr']:.2f} / {f['ssim']:.3f} | {nov['psnr']:.2f} / {nov['ssim']:.3f} | "
             f"{f['psnr'] - edi['psnr']:+.2f} | {f['psnr'] - b['psnr']:+.2f} | "
-            f"{nov['psnr'] - f['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | {r['seconds'] / 60:.1f} |")
+            f"{nov['psnr'] - f['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | "
+            f"{r['seconds'] / 60:.1f} |")
 
 
 HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs deblur | fusiongs novel | vs EDI | vs blurry | "
