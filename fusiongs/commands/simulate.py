@@ -14,7 +14,7 @@ _NUMBERS = {  # option -> (SimConfig field, type, smallest allowed value)
     "blur_samples": ("blur_samples", int, 1), "supersample": ("supersample", int, 1),
 }
 _DVS_NUMBERS = {"theta_on": float, "theta_off": float, "theta_sigma": float,
-                "refractory_us": float, "ba_rate": float}
+                "refractory_us": float, "ba_rate": float, "theta_gradient": float}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -32,6 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--theta-on", default=None, help="nominal ON threshold (default 0.25)")
     parser.add_argument("--theta-off", default=None, help="nominal OFF threshold (default 0.22)")
     parser.add_argument("--theta-sigma", default=None, help="per-pixel threshold spread (default 0.03)")
+    parser.add_argument("--theta-gradient", default=None,
+                        help="thresholds vary by a factor 1±G from the left to the right edge (default 0)")
     parser.add_argument("--refractory-us", default=None, help="refractory period in µs (default 100)")
     parser.add_argument("--ba-rate", default=None, help="background-activity noise, Hz/pixel (default 0.1)")
     parser.add_argument("--dvs-rate", default="1000", help="event-model render rate, Hz (default 1000)")

@@ -37,6 +37,9 @@ class DVSParams:
         refractory_s: refractory period in seconds.
         ba_rate_hz: background-activity noise rate per pixel (Hz), half ON half OFF.
         eps: offset inside ``log(I + eps)`` (radiance units; scenes have radiance range ~1).
+        theta_gradient: smooth spatial variation of the nominal thresholds: a factor
+            ``1 + g (2 x / (W - 1) - 1)`` from the left to the right edge (0 = none); models a
+            sensor whose thresholds vary across pixels (a learned threshold field can follow it).
     """
 
     theta_on: float = 0.25
@@ -46,6 +49,7 @@ class DVSParams:
     refractory_s: float = 100e-6
     ba_rate_hz: float = 0.1
     eps: float = 1e-3
+    theta_gradient: float = 0.0
 
 
 def sensor_log(rgb: torch.Tensor, cfa: str | None, eps: float) -> np.ndarray:
@@ -69,11 +73,16 @@ def sensor_log(rgb: torch.Tensor, cfa: str | None, eps: float) -> np.ndarray:
 
 
 def pixel_thresholds(params: DVSParams, n_pixels: int, rng: np.random.Generator,
-                     scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Per-pixel ON and OFF thresholds ``[P]`` float64: ``scale * (nominal + sigma * N(0, 1))``."""
+                     scale: float = 1.0, width: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel ON and OFF thresholds ``[P]`` float64 (row-major pixels of a ``width``-wide sensor):
+    ``scale * (nominal * ramp(x) + sigma * N(0, 1))`` with the ``theta_gradient`` ramp."""
     z = rng.standard_normal((2, n_pixels))
-    on = np.maximum(params.theta_on + params.theta_sigma * z[0], params.theta_min) * scale
-    off = np.maximum(params.theta_off + params.theta_sigma * z[1], params.theta_min) * scale
+    ramp = 1.0
+    if params.theta_gradient and width:
+        x = (np.arange(n_pixels) % width) / max(width - 1, 1)
+        ramp = 1.0 + params.theta_gradient * (2.0 * x - 1.0)
+    on = np.maximum(params.theta_on * ramp + params.theta_sigma * z[0], params.theta_min) * scale
+    off = np.maximum(params.theta_off * ramp + params.theta_sigma * z[1], params.theta_min) * scale
     return on, off
 
 

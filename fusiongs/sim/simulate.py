@@ -146,7 +146,7 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     for k, t in enumerate(times):
         logs[k] = dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps)
     t_events = time.perf_counter()
-    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1], rng_theta)
+    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1], rng_theta, width=cfg.width)
     scale = 1.0
     if cfg.events_target is not None:
         scale = tune_threshold_scale(logs, th_on, th_off, cfg.events_target)

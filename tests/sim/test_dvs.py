@@ -104,3 +104,17 @@ def test_grey_sensor_uses_rec601_and_colour_sensor_one_channel_per_pixel():
     raw = dvs.sensor_log(rgb, "RGGB", 1e-3).reshape(2, 2)
     expected = np.log(np.array([[0.5, 0.25], [0.25, 0.125]]) + 1e-3)
     assert np.allclose(raw, expected)
+
+
+def test_threshold_gradient_varies_thresholds_from_left_to_right():
+    import numpy as np
+
+    from fusiongs.sim.dvs import DVSParams, pixel_thresholds
+
+    p = DVSParams(theta_sigma=0.0, theta_gradient=0.4)
+    on, off = pixel_thresholds(p, 4 * 10, np.random.default_rng(0), width=10)
+    on = on.reshape(4, 10)
+    assert np.allclose(on[:, 0], 0.25 * 0.6) and np.allclose(on[:, -1], 0.25 * 1.4)
+    assert np.all(np.diff(on, axis=1) > 0)
+    flat, _ = pixel_thresholds(DVSParams(theta_sigma=0.0), 40, np.random.default_rng(0), width=10)
+    assert np.allclose(flat, 0.25)
