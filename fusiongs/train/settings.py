@@ -106,7 +106,6 @@ class DensifySettings:
 @dataclass
 class OutputSettings:
     progress: bool = True            # progress bar with loss and PSNR
-    eval_every: int = 250            # iterations between PSNR read-outs (deblur views)
     video_fps: int = 12
     checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
 

@@ -128,13 +128,11 @@ def _restore(ckpt: dict[str, Any], state: FusionState) -> None:
         state.log_gain.copy_(ckpt["log_gain"])
 
 
-def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False,
-          progress_psnr=None) -> Trained:
+def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False) -> Trained:
     """Fit the scene; checkpoints go to ``out_dir/checkpoint.pt`` (also on Ctrl-C).
 
-    Args:
-        progress_psnr: optional callable ``(state, data) -> float`` shown in the progress bar
-            every ``output.eval_every`` iterations (e.g. deblur-view PSNR against truth).
+    The progress bar shows the loss, the number of Gaussians and a running PSNR of the re-rendered
+    blurry frames against the captured ones.
     """
     from tqdm import tqdm
 
@@ -170,7 +168,12 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
                disable=not cfg.output.progress, desc="fusiongs", dynamic_ncols=True)
     psnr_now = float("nan")
-    t_begin = time.perf_counter()
+    t_begin, seconds_before = time.perf_counter(), history.seconds
+
+    def save() -> None:
+        history.seconds = seconds_before + time.perf_counter() - t_begin
+        save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+
     try:
         for it in bar:
             frame = int(order[it % len(order)])
@@ -191,18 +194,14 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if "psnr" in res.parts:  # running mean of the blurry-frame PSNR (re-rendered input)
                 p = res.parts["psnr"]
                 psnr_now = p if math.isnan(psnr_now) else 0.9 * psnr_now + 0.1 * p
-            if progress_psnr is not None and (it + 1) % cfg.output.eval_every == 0:
-                psnr_now = progress_psnr(state, data)
             bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
-                save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+                save()
     except KeyboardInterrupt:
-        history.seconds += time.perf_counter() - t_begin
-        save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+        save()
         raise
-    history.seconds += time.perf_counter() - t_begin
-    save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+    save()
     return tr
 
 
