@@ -242,7 +242,7 @@ fig = viz.strip([np.clip(lin, 0, 1), np.clip(sharp, 0, 1), diff / max(float(diff
 #
 # A static camera gives nothing to reconstruct, so this step runs on a **simulated** moving camera:
 # six sharp truth images of the `boxes` scene (in a real run these would be the EDI results of
-# step 1). The pycolmap 4.2 calls are:
+# step 1). `fusiongs.camera.sfm.estimate_poses` wraps these pycolmap 4.2 calls:
 #
 # ```python
 # reader = pycolmap.ImageReaderOptions()
@@ -259,12 +259,10 @@ fig = viz.strip([np.clip(lin, 0, 1), np.clip(sharp, 0, 1), diff / max(float(diff
 # ```
 #
 # COLMAP's poses are world-to-camera in an arbitrary frame and scale; comparing them with the true
-# camera centres needs a similarity alignment (Umeyama), done below in a few lines of numpy.
+# camera centres needs a similarity alignment (`fusiongs.camera.sfm.umeyama`).
 
 # %%
-import pycolmap  # noqa: E402  (only this demonstration needs it)
-
-pycolmap.logging.minloglevel = 1  # COLMAP's progress log is long: warnings and errors only
+from fusiongs.camera.sfm import estimate_poses, umeyama
 
 size = (160, 120) if FAST else (320, 240)
 sfm = run_simulation(SimConfig(preset="boxes", width=size[0], height=size[1], duration=1.0, frames=6,
@@ -273,43 +271,18 @@ sfm = run_simulation(SimConfig(preset="boxes", width=size[0], height=size[1], du
 SFM = WORK / "sfm"
 write_simulated_scene(sfm.scene, sfm.gt, SFM / "scene", overwrite=True)
 images = SFM / "scene" / "gt"  # deblur_000000.png ... deblur_000005.png: sharp mid-exposure views
-cam = sfm.scene.camera
-db = SFM / "database.db"
-db.unlink(missing_ok=True)
-(SFM / "sparse").mkdir(exist_ok=True)
-reader = pycolmap.ImageReaderOptions()
-reader.camera_model = "PINHOLE"
-reader.camera_params = f"{cam.fx},{cam.fy},{cam.cx},{cam.cy}"
-extract = pycolmap.FeatureExtractionOptions()
-extract.num_threads = 2
-pycolmap.extract_features(db, images, camera_mode=pycolmap.CameraMode.SINGLE, reader_options=reader,
-                          extraction_options=extract, device=pycolmap.Device.cpu)
-pycolmap.match_sequential(db, device=pycolmap.Device.cpu)
-opts = pycolmap.IncrementalPipelineOptions()
-opts.ba_refine_focal_length = False
-opts.ba_refine_principal_point = False
-opts.num_threads = 2
-opts.random_seed = 0
-recs = pycolmap.incremental_mapping(db, images, SFM / "sparse", options=opts)
-best = max(recs.values(), key=lambda r: r.num_reg_images()) if recs else None
-print(f"{best.num_reg_images() if best else 0}/6 images registered, "
-      f"{best.num_points3D() if best else 0} 3D points")
+poses = estimate_poses(images, sfm.scene.camera, SFM / "colmap")  # {stem: c2w}, COLMAP's frame
+print(f"{len(poses)}/6 images registered")
 
 # %%
-if best is not None and best.num_reg_images() >= 3:
-    regs = sorted(best.images.values(), key=lambda im: im.name)
-    est = np.array([im.projection_center() for im in regs])  # camera centres, COLMAP frame
+if len(poses) >= 3:
+    names = sorted(poses)
+    est = np.array([poses[n][:3, 3] for n in names])  # camera centres, COLMAP frame
     mids = {r.name: r.t for r in sfm.scene.renders}
-    t_reg = np.array([mids[Path(im.name).stem] for im in regs])
     p = sfm.scene.poses  # true trajectory samples (camera-to-world)
-    true = np.stack([p.c2w[np.argmin(np.abs(p.t - t)), :3, 3] for t in t_reg])
-    # Umeyama similarity est -> true: scale s, rotation R, translation t.
-    mu_e, mu_t = est.mean(0), true.mean(0)
-    u, d, vt = np.linalg.svd((true - mu_t).T @ (est - mu_e) / len(est))
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
-    R = u @ flip @ vt
-    s = np.trace(np.diag(d) @ flip) / ((est - mu_e) ** 2).sum(1).mean()
-    aligned = s * est @ R.T + (mu_t - s * R @ mu_e)
+    true = np.stack([p.c2w[np.argmin(np.abs(p.t - mids[n])), :3, 3] for n in names])
+    s, R, t = umeyama(est, true)  # similarity est -> true
+    aligned = s * est @ R.T + t
     err = np.linalg.norm(aligned - true, axis=1)
     path_len = np.linalg.norm(np.diff(true, axis=0), axis=1).sum()
     print(f"camera centre error after alignment: mean {err.mean():.3f} m over a {path_len:.2f} m path")
