@@ -113,3 +113,16 @@ def test_shipped_default_config_equals_builtin_defaults():
     assert load_config(DeblurConfig, config_file("deblur.yaml")) == DeblurConfig()
     fast = load_config(DeblurConfig, config_file("deblur_fast.yaml"))
     assert dataclasses.replace(fast) != DeblurConfig()
+
+
+def test_render_and_eval_on_missing_run_are_one_line_and_exit_2(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "nope"), "--t", "0.1"]) == 2
+    assert main(["eval", str(tmp_path / "nope"), "--gt", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "checkpoint" in err[0] and "run folder" in err[1]
+
+
+def test_corrupt_checkpoint_is_named(tmp_path, capsys):
+    (tmp_path / "checkpoint.pt").write_bytes(b"not a checkpoint")
+    assert main(["render", str(tmp_path), "--t", "0.1"]) == 2
+    assert "checkpoint.pt" in capsys.readouterr().err
