@@ -163,7 +163,7 @@ overrides = ["output.progress=false"]
 if FAST:
     overrides += ["optim.iterations=30", "init.n_points=500", "blur.n_samples=3", "events.warmup=10",
                   "events.pixels=512", "optim.pose_start=20", "densify.start=10", "densify.every=10",
-                  "densify.stop=25", "output.eval_every=10"]
+                  "densify.stop=25"]
 result = run_deblur(SCENE, OUT, config=config_file("deblur_fast.yaml"), overrides=overrides)
 print(sorted(p.name for p in OUT.iterdir()))
 
@@ -172,7 +172,8 @@ print(sorted(p.name for p in OUT.iterdir()))
 #
 # `metrics.json` holds PSNR and SSIM (8-bit sRGB, METHOD.md §8) per view and method, and their
 # means: `deblur` views are the frames' mid-exposure instants (blurry input, EDI with a threshold
-# estimated per frame, and fusiongs), `novel` views are held-out instants between exposures, which
+# estimated from the consistency of consecutive frames, and fusiongs), `novel` views are held-out
+# instants between exposures, which
 # only a 3D model can render.
 
 # %%
