@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -42,6 +43,22 @@ class TrainData:
     edi: torch.Tensor | None = None  # [F, H, W, 3] linear EDI images for the prior, or None
     hpf_times: torch.Tensor | None = None  # [G] float64 s: read-outs of the HPF intensity images
     hpf: torch.Tensor | None = None  # [G, H, W, 1] HPF log-intensity images (event-only anchor)
+    pvc_times: torch.Tensor | None = None  # [R] float64 s: read-outs of the pvc targets
+    pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
+
+    _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
+
+    def coarse(self, factor: int) -> tuple[PinholeCamera, torch.Tensor]:
+        """The camera and frames at ``1/factor`` resolution: ``(camera, [F, H//f, W//f, C])``.
+
+        Frames are averaged over ``factor x factor`` blocks in linear light (then re-encoded), so
+        a coarse pixel is the mean irradiance of the full-resolution pixels it covers; the coarse
+        camera covers the first ``f * (W // f)`` columns and ``f * (H // f)`` rows exactly.
+        """
+        if factor not in self._coarse:
+            self._coarse[factor] = (coarse_camera(self.camera, factor),
+                                    downsample_frames(self.targets, self.response, factor))
+        return self._coarse[factor]
 
     @property
     def n_frames(self) -> int:
@@ -52,6 +69,25 @@ class TrainData:
         assert self.events is not None
         c = self.events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
         return torch.from_numpy(np.ascontiguousarray(c)).to(device=device, dtype=torch.float32)
+
+
+def coarse_camera(camera: PinholeCamera, factor: int) -> PinholeCamera:
+    """``camera`` with pixels ``factor`` times larger (size floored; exact scale ``1/factor``)."""
+    f = int(factor)
+    return PinholeCamera(camera.width // f, camera.height // f, camera.fx / f, camera.fy / f,
+                         camera.cx / f, camera.cy / f, camera.distortion)
+
+
+def downsample_frames(frames: torch.Tensor, response: str, factor: int) -> torch.Tensor:
+    """``[F, H, W, C]`` frames encoded by ``response`` -> ``[F, H//f, W//f, C]``, block means taken
+    in linear light."""
+    from fusiongs.frames.response import linear_to_response, response_to_linear
+
+    f = int(factor)
+    h, w = frames.shape[1] // f * f, frames.shape[2] // f * f
+    lin = response_to_linear(frames[:, :h, :w], response).permute(0, 3, 1, 2)
+    small = torch.nn.functional.avg_pool2d(lin, f).permute(0, 2, 3, 1)
+    return linear_to_response(small, response).contiguous()
 
 
 def edi_images(scene: Scene, theta: float, device: torch.device) -> torch.Tensor:
@@ -76,6 +112,27 @@ def hpf_images(events: EventStream, t_range: tuple[float, float], n: int, tau: f
     times = np.linspace(t_range[0], t_range[1], max(int(n), 2))
     v = high_pass_filter(events, times * 1e6, tau=tau, contrast=theta0)
     return torch.from_numpy(times), torch.from_numpy(v[..., None]).to(device)
+
+
+def pvc_readouts(events: EventStream, instants: np.ndarray, t_range: tuple[float, float],
+                 spacing: float, tau: float, theta0: float, device: torch.device
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Photovoltage read-outs for the ``pvc`` event loss, computed once (one pass over the stream).
+
+    Read-outs are taken at ``instants`` (e.g. every frame's exposure instants) and on a grid of
+    ``spacing`` seconds over ``t_range``; a window's target is then ``pvc[b] - pvc[a]``
+    (Event-3DGS photovoltage contrast, METHOD.md §2), free of the O(events) cost per window.
+
+    Returns:
+        ``(times [R] float64 s, maps [R, H, W] float32 V(t)/θ0)``.
+    """
+    from fusiongs.events.hpf import high_pass_filter
+
+    n_grid = max(int(math.ceil((t_range[1] - t_range[0]) / spacing)) + 1, 2)
+    times = np.unique(np.concatenate([np.asarray(instants, np.float64).reshape(-1),
+                                      np.linspace(t_range[0], t_range[1], n_grid)]))
+    v = high_pass_filter(events, times * 1e6, tau=tau, contrast=theta0) / theta0
+    return torch.from_numpy(times), torch.from_numpy(v.astype(np.float32)).to(device)
 
 
 def prepare_data(scene: Scene, device: torch.device, use_events: bool) -> TrainData:

@@ -8,6 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
+from fusiongs.errors import ConfigError
+
 
 @dataclass
 class InitSettings:
@@ -24,6 +26,14 @@ class BlurSettings:
     ssim_lambda: float = 0.2         # λ in (1-λ)·L1 + λ·(1-SSIM)
     weight: float = 1.0              # weight of the blur loss
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
+    coarse_until: int = 0            # before this iteration, and only while λ_ev = 0, render at
+    coarse_factor: int = 2           # 1/coarse_factor resolution against area-downsampled frames
+
+    def __post_init__(self) -> None:
+        for name in ("n_samples", "coarse_factor"):
+            v = getattr(self, name)
+            if v < 1:
+                raise ConfigError("config", f"blur.{name}", "an integer >= 1", repr(v))
 
 
 @dataclass

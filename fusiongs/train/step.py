@@ -13,7 +13,6 @@ from dataclasses import dataclass
 
 import torch
 
-from fusiongs.events.hpf import high_pass_filter
 from fusiongs.losses.blur import apply_response, blur_loss, exposure_average, exposure_instants
 from fusiongs.losses.colour import channel_weights_for, demosaic_event_maps
 from fusiongs.losses.event import (
@@ -53,11 +52,32 @@ def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, 
     return apply_response(mean, response)
 
 
-def _hpf_target(data: TrainData, t_a: float, t_b: float, ev: EventSettings, theta0: float,
-                device: torch.device) -> torch.Tensor:
-    """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; METHOD.md §2)."""
-    v = high_pass_filter(data.events, [t_a * 1e6, t_b * 1e6], tau=ev.hpf_tau, contrast=theta0)
-    return torch.from_numpy((v[1] - v[0]) / theta0).to(device)
+def nearest_readout(times: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+    """Index of the read-out in sorted ``times`` ``[R]`` nearest to each of ``t`` ``[...]``."""
+    idx = torch.searchsorted(times, t.contiguous()).clamp(1, len(times) - 1)
+    left_closer = (t - times[idx - 1]) <= (times[idx] - t)
+    return torch.where(left_closer, idx - 1, idx)
+
+
+def snap_windows(windows: torch.Tensor, readouts: torch.Tensor) -> torch.Tensor:
+    """Move both ends of each window ``[W, 2]`` to their nearest read-outs, keeping ``t_a < t_b``
+    (when both meet one read-out, the start moves one read-out earlier)."""
+    idx = nearest_readout(readouts, windows)
+    ib = idx[:, 1].clamp(min=1)
+    ia = torch.minimum(idx[:, 0], ib - 1)
+    return torch.stack([readouts[ia], readouts[ib]], dim=1)
+
+
+def _pvc_target(data: TrainData, t_a: float, t_b: float) -> torch.Tensor:
+    """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; METHOD.md §2) from
+    the precomputed read-outs; both ends must be read-out instants."""
+    if data.pvc is None or data.pvc_times is None:
+        raise RuntimeError("the pvc loss needs TrainData.pvc (see fusiongs.train.data.pvc_readouts)")
+    t = torch.tensor([t_a, t_b], dtype=torch.float64)
+    idx = nearest_readout(data.pvc_times, t)
+    if float((data.pvc_times[idx] - t).abs().max()) > 1e-9:
+        raise RuntimeError(f"event window [{t_a}, {t_b}) s does not end on pvc read-outs")
+    return data.pvc[idx[1]] - data.pvc[idx[0]]
 
 
 def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, lin_a: torch.Tensor,
@@ -70,7 +90,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     la, lb = lin_a.reshape(-1, 3)[pix], lin_b.reshape(-1, 3)[pix]
     signed = counts[0] - counts[1]
     if ev.loss == "pvc":
-        signed = _hpf_target(data, t_a, t_b, ev, cfg.threshold.init, device)
+        signed = _pvc_target(data, t_a, t_b)
     th = state.threshold
     t_mid = 0.5 * (t_a + t_b)  # for a drifting θ
     if data.cfa_index is None:  # grey sensor: I = w · L
@@ -133,7 +153,7 @@ def own_channel(linear: torch.Tensor, data: TrainData, grey_weights) -> torch.Te
 
 
 def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
-                  lam_ev: float, gen: torch.Generator, it: int = 0) -> StepResult:
+                  lam_ev: float, gen: torch.Generator, it: int = 0, coarse: int = 1) -> StepResult:
     """Render and compute the losses of one iteration (METHOD.md §3).
 
     With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
@@ -145,10 +165,17 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         lam_ev: event weight now (0 during the warm-up: no event renders are made then, except
             in event-only mode).
         it: the iteration (for the EDI prior's schedule).
+        coarse: render at ``1/coarse`` resolution against block-averaged frames (only without
+            events in this step: count maps do not average like log intensities).
     """
     n = cfg.blur.n_samples
     has_frames = data.n_frames > 0
     use_events = data.events is not None and (lam_ev > 0 or not has_frames)
+    camera, targets = data.camera, data.targets
+    if coarse > 1:
+        if use_events or not has_frames:
+            raise ValueError("coarse rendering is only for steps without events")
+        camera, targets = data.coarse(coarse)
     times = []
     if has_frames:
         s, e = data.exposures[frame]
@@ -160,23 +187,31 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                                    min(cfg.events.min_window, data.frame_interval))
         if data.hpf is not None:
             free, readout = snap_to_readouts(free, data.hpf_times, data.t_range[0])
+        if data.pvc_times is not None:  # pvc targets exist at read-outs only
+            free = snap_windows(free, data.pvc_times)
+            if readout is not None:
+                readout = nearest_readout(data.hpf_times, free[:, 1])
         times.append(free.reshape(-1))
     t_all = torch.cat(times)
     t0 = time.perf_counter()
-    lin, _, meta = state.render(data.camera, t_all, cfg.backend)
+    lin, _, meta = state.render(camera, t_all, cfg.backend)
     parts: dict[str, float] = {"render_s": time.perf_counter() - t0}
     loss = lin.new_zeros(())
     if has_frames:
         pred = predict_blurry(lin[:n], state.log_gain[frame], data.response,
-                              data.targets.shape[-1], cfg.events.grey_weights)
-        l_blur = blur_loss(pred[None], data.targets[frame][None], cfg.blur.ssim_lambda)
+                              targets.shape[-1], cfg.events.grey_weights)
+        l_blur = blur_loss(pred[None], targets[frame][None], cfg.blur.ssim_lambda)
         loss = loss + cfg.blur.weight * l_blur
         parts["blur"] = float(l_blur.detach())
-        mse = float(((pred.detach().clamp(0, 1) - data.targets[frame]) ** 2).mean())
+        mse = float(((pred.detach().clamp(0, 1) - targets[frame]) ** 2).mean())
         parts["psnr"] = 10.0 * math.log10(1.0 / max(mse, 1e-12))
     lam_edi = edi_prior_weight(cfg, it)
     if has_frames and data.edi is not None and lam_edi > 0 and n % 2 == 1:
-        l_edi = edi_prior_loss(lin[n // 2], data.edi[frame])
+        edi = data.edi[frame]
+        if coarse > 1:
+            h, w = edi.shape[0] // coarse * coarse, edi.shape[1] // coarse * coarse
+            edi = torch.nn.functional.avg_pool2d(edi[:h, :w].permute(2, 0, 1), coarse).permute(1, 2, 0)
+        l_edi = edi_prior_loss(lin[n // 2], edi)
         loss = loss + lam_edi * l_edi
         parts["edi"] = float(l_edi.detach())
     if use_events:

@@ -24,7 +24,8 @@ from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
-from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data
+from fusiongs.losses.blur import exposure_instants
+from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data, pvc_readouts
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState, build_state, scene_extent
@@ -146,6 +147,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         eo = cfg.event_only
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
                                               eo.intensity_tau, cfg.threshold.init, device)
+    if cfg.events.loss == "pvc" and data.events is not None:
+        data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, initial_theta(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
@@ -179,7 +182,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             frame = int(order[it % len(order)])
             lam_ev = _event_weight(cfg, data, it)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
-            res = training_step(state, data, cfg, frame, lam_ev, gen, it)
+            res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev))
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg)
             t_back = time.perf_counter()
@@ -205,6 +208,20 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     return tr
 
 
+def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The ``pvc`` targets' read-outs: every exposure instant, the event-only anchor instants and a
+    grid of ``events.min_window`` spacing (at most 2000 steps over the stream)."""
+    instants = [exposure_instants(s, e, cfg.blur.n_samples).numpy() for s, e in data.exposures.tolist()]
+    if data.hpf_times is not None:
+        instants.append(data.hpf_times.numpy())
+    span = data.t_range[1] - data.t_range[0]
+    spacing = max(cfg.events.min_window, span / 2000)
+    flat = np.concatenate(instants) if instants else np.zeros(0)
+    return pvc_readouts(data.events, flat, data.t_range, spacing, cfg.events.hpf_tau,
+                        cfg.threshold.init, device)
+
+
 def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig) -> float:
     """θ to start from: the EDI consecutive-frame estimate when enabled and possible, else the
     configured ``threshold.init`` (METHOD.md §4-5)."""
@@ -222,6 +239,15 @@ def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:
         eo = cfg.event_only
         return event_only_alpha(it, eo.alpha_warmup, eo.alpha_final, eo.alpha_ramp)
     return event_weight(it, cfg.events.warmup, cfg.events.weight, cfg.events.ramp)
+
+
+def _coarse(cfg: DeblurConfig, data: TrainData, it: int, lam_ev: float) -> int:
+    """Resolution divisor now: ``blur.coarse_factor`` before ``blur.coarse_until`` while the
+    event loss is off (with frames), else 1."""
+    b = cfg.blur
+    if data.n_frames and lam_ev == 0 and it < b.coarse_until and b.coarse_factor > 1:
+        return b.coarse_factor
+    return 1
 
 
 def _schedule(state: FusionState, strategy: DensifyStrategy, opts, cfg: DeblurConfig, it: int,
