@@ -27,7 +27,7 @@ from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.data import TrainData
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
-from fusiongs.train.settings import DeblurConfig, EventSettings
+from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
 
 

@@ -19,12 +19,12 @@ import torch
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.io.scene import Scene
+from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
 from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
-from fusiongs.losses.blur import exposure_instants
 from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data, pvc_readouts
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
