@@ -28,12 +28,16 @@ class BlurSettings:
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
     coarse_until: int = 0            # before this iteration, and only while λ_ev = 0, render at
     coarse_factor: int = 2           # 1/coarse_factor resolution against area-downsampled frames
+    crop: tuple[int, int] | None = None  # (w, h): render a random crop per step; None = whole frame
 
     def __post_init__(self) -> None:
         for name in ("n_samples", "coarse_factor"):
             v = getattr(self, name)
             if v < 1:
                 raise ConfigError("config", f"blur.{name}", "an integer >= 1", repr(v))
+        if self.crop is not None and min(self.crop) < 16:
+            raise ConfigError("config", "blur.crop", "null or [w, h] with w, h >= 16 pixels",
+                              repr(self.crop))
 
 
 @dataclass

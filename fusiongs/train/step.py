@@ -25,6 +25,7 @@ from fusiongs.losses.event import (
 )
 from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
+from fusiongs.train.crop import Crop
 from fusiongs.train.data import TrainData
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
 from fusiongs.train.settings import DeblurConfig
@@ -81,38 +82,46 @@ def _pvc_target(data: TrainData, t_a: float, t_b: float) -> torch.Tensor:
 
 
 def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, lin_a: torch.Tensor,
-                      lin_b: torch.Tensor, t_a: float, t_b: float, gen: torch.Generator) -> torch.Tensor:
-    """Event loss of one window ``[t_a, t_b)`` from the linear renders ``[H, W, 3]`` at its ends."""
+                      lin_b: torch.Tensor, t_a: float, t_b: float, gen: torch.Generator,
+                      crop: Crop | None = None) -> torch.Tensor:
+    """Event loss of one window ``[t_a, t_b)`` from the linear renders ``[h, w, 3]`` at its ends.
+
+    Args:
+        crop: the part of the sensor that ``lin_a`` / ``lin_b`` show (the whole sensor if None);
+            pixels are sampled inside it.
+    """
     ev = cfg.events
     device = lin_a.device
-    counts = data.count_maps(t_a, t_b, device)  # [2, H, W]
+    crop = Crop.whole(data.camera) if crop is None else crop
+    full_counts = data.count_maps(t_a, t_b, device)  # [2, H, W]
+    counts = crop.maps(full_counts)
     pix = sample_event_pixels(counts, min(ev.pixels, counts[0].numel()), ev.frac_with_events, gen)
+    full_pix = crop.full_index(pix)  # for θ fields and the CFA
     la, lb = lin_a.reshape(-1, 3)[pix], lin_b.reshape(-1, 3)[pix]
-    signed = counts[0] - counts[1]
-    if ev.loss == "pvc":
-        signed = _pvc_target(data, t_a, t_b)
+    full_signed = _pvc_target(data, t_a, t_b) if ev.loss == "pvc" else full_counts[0] - full_counts[1]
+    signed = crop.maps(full_signed)
     th = state.threshold
     t_mid = 0.5 * (t_a + t_b)  # for a drifting θ
     if data.cfa_index is None:  # grey sensor: I = w · L
         d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
-        th_p, th_n = th.theta(pix, t=t_mid)
+        th_p, th_n = th.theta(full_pix, t=t_mid)
         n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
         d_gt = signed.reshape(-1)[pix, None]
         weights = None
     elif ev.colour_mode == "mask":  # each pixel in its own CFA channel on the raw grid
-        ch = data.cfa_index.reshape(-1)[pix]
+        ch = data.cfa_index.reshape(-1)[full_pix]
         d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)
-        th_p, th_n = th.theta(pix, t=t_mid, channel=ch)
+        th_p, th_n = th.theta(full_pix, t=t_mid, channel=ch)
         n_pos, n_neg = counts[0].reshape(-1)[pix, None], counts[1].reshape(-1)[pix, None]
         d_gt = signed.reshape(-1)[pix, None]
         weights = channel_weights_for(ch, ev.channel_weights)
     else:  # demosaic the window's event maps into three-channel targets (Event-3DGS app. C)
         pattern = data.events.cfa
-        maps = demosaic_event_maps(torch.stack([counts[0], counts[1], signed]), pattern)
-        flat = maps.reshape(3, -1, 3)[:, pix]  # [3, P, 3]
+        maps = demosaic_event_maps(torch.stack([full_counts[0], full_counts[1], full_signed]), pattern)
+        flat = crop.images(maps).reshape(3, -1, 3)[:, pix]  # [3, P, 3]
         n_pos, n_neg, d_gt = flat[0], flat[1], flat[2]
         d = delta_log(la, lb, "rgb", eps=ev.log_eps)
-        th_p, th_n = th.theta(pix, t=t_mid)
+        th_p, th_n = th.theta(full_pix, t=t_mid)
         weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device=device)
     if ev.loss == "mse":
         return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights)
@@ -167,6 +176,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         it: the iteration (for the EDI prior's schedule).
         coarse: render at ``1/coarse`` resolution against block-averaged frames (only without
             events in this step: count maps do not average like log intensities).
+
+    With ``blur.crop = (w, h)`` (and frames, at full resolution) every render of the step shows one
+    random ``w`` × ``h`` crop; the blur and event losses are taken on it.
     """
     n = cfg.blur.n_samples
     has_frames = data.n_frames > 0
@@ -176,6 +188,10 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         if use_events or not has_frames:
             raise ValueError("coarse rendering is only for steps without events")
         camera, targets = data.coarse(coarse)
+    crop = Crop.whole(camera)
+    if has_frames and coarse == 1 and cfg.blur.crop is not None:
+        crop = Crop.random(camera, cfg.blur.crop, gen)
+        camera, targets = crop.camera(camera), crop.images(targets)
     times = []
     if has_frames:
         s, e = data.exposures[frame]
@@ -211,6 +227,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         if coarse > 1:
             h, w = edi.shape[0] // coarse * coarse, edi.shape[1] // coarse * coarse
             edi = torch.nn.functional.avg_pool2d(edi[:h, :w].permute(2, 0, 1), coarse).permute(1, 2, 0)
+        else:
+            edi = crop.images(edi)
         l_edi = edi_prior_loss(lin[n // 2], edi)
         loss = loss + lam_edi * l_edi
         parts["edi"] = float(l_edi.detach())
@@ -223,7 +241,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         windows += [(base + 2 * i, base + 2 * i + 1, float(a), float(b))
                     for i, (a, b) in enumerate(free)]
         if lam_ev > 0 and windows:
-            l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen)
+            l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen, crop)
                        for j, k, ta, tb in windows) / len(windows)
             loss = loss + lam_ev * l_ev
             parts["event"] = float(l_ev.detach())
