@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -25,12 +26,14 @@ import torch  # noqa: E402
 
 from fusiongs.sim.simulate import SimConfig, run_simulation  # noqa: E402
 from fusiongs.sim.write import write_simulated_scene  # noqa: E402
-from fusiongs.train.pipeline import run_deblur  # noqa: E402
+from fusiongs.train.config import to_dict  # noqa: E402
+from fusiongs.train.pipeline import resolve_config, run_deblur  # noqa: E402
 
 ABLATIONS = {
     "no events": ["events.enabled=false"],
-    "fixed theta": ["threshold.learn=false", "threshold.estimate=false"],
-    "full (mse)": [],
+    "theta fixed at the EDI estimate": ["threshold.learn=false"],
+    "theta fixed at 0.22": ["threshold.learn=false", "threshold.estimate=false"],
+    "full (mse, theta learned)": [],
     "band": ["events.loss=band"],
     "pvc": ["events.loss=pvc"],
     "N=1": ["blur.n_samples=1"],
@@ -52,12 +55,48 @@ def scene_for(root: Path, preset: str, seed: int, cfa: str | None, args) -> Path
     return path
 
 
-def run_one(scene: Path, out: Path, config: str, overrides: list[str]) -> dict:
+def run_one(scene: Path, out: Path, config: str, overrides: list[str], reuse: bool = False) -> dict:
+    """Deblur ``scene`` into ``out``; with ``reuse``, a finished run with the same settings is read
+    back from its ``bench_result.json`` instead (to resume an interrupted benchmark)."""
+    saved = out / "bench_result.json"
+    key = {"config": config, "overrides": list(overrides)}
+    if reuse and saved.is_file():
+        old = json.loads(saved.read_text())
+        if old.get("key") == key:
+            return old["result"]
     t0 = time.perf_counter()
     result = run_deblur(scene, out, config=config, overrides=["output.progress=false", *overrides],
                         log=lambda *_: None)
     result["wall_seconds"] = time.perf_counter() - t0
+    saved.write_text(json.dumps({"key": key, "result": result}, indent=2))
     return result
+
+
+def settings_key(config: str, overrides: list[str]) -> str:
+    """The resolved settings of a run, as text (equal for runs that would train identically)."""
+    return json.dumps(to_dict(resolve_config(config, overrides)), sort_keys=True)
+
+
+def mean_row(results: dict) -> tuple[str, list[str]]:
+    """The mean over runs and the issue's quality targets checked on it."""
+    def m(getter):
+        vals = [getter(r) for r in results.values()]
+        return sum(vals) / len(vals)
+
+    fus = m(lambda r: r["mean"]["deblur"]["fusiongs"]["psnr"])
+    edi = m(lambda r: r["mean"]["deblur"]["edi"]["psnr"])
+    blur = m(lambda r: r["mean"]["deblur"]["blurry"]["psnr"])
+    nov = m(lambda r: r["mean"]["novel"]["fusiongs"]["psnr"])
+    mins = m(lambda r: r["wall_seconds"] / 60)
+    line = (f"| mean of {len(results)} | {blur:.2f} | {edi:.2f} | {fus:.2f} | {nov:.2f} | "
+            f"{fus - edi:+.2f} | {fus - blur:+.2f} | {nov - fus:+.2f} | | | {mins:.1f} (wall) |")
+    checks = [f"deblur >= EDI + 2 dB: {fus - edi:+.2f} dB -> {'met' if fus - edi >= 2 else 'NOT met'}",
+              f"deblur >= blurry + 8 dB: {fus - blur:+.2f} dB -> {'met' if fus - blur >= 8 else 'NOT met'}",
+              f"novel within 2 dB of deblur: {nov - fus:+.2f} dB -> "
+              f"{'met' if abs(nov - fus) <= 2 else 'NOT met'}",
+              f"<= 10 min per scene (wall, all included): {mins:.1f} min -> "
+              f"{'met' if mins <= 10 else 'NOT met'}"]
+    return line, checks
 
 
 def row(label: str, r: dict) -> str:
@@ -92,6 +131,7 @@ def main(argv=None) -> int:
     p.add_argument("--events", type=int, default=8_000_000, help="events target (0: nominal thresholds)")
     p.add_argument("--ablation", action="store_true")
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--reuse", action="store_true", help="read back finished runs with the same settings")
     p.add_argument("overrides", nargs="*", help="config overrides for every run")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -104,18 +144,25 @@ def main(argv=None) -> int:
     for preset, seed, cfa in runs:
         scene = scene_for(root, preset, seed, cfa, args)
         label = f"{preset} s{seed} {cfa or 'grey'}"
-        r = run_one(scene, root / "runs" / scene.name, args.config, args.overrides)
+        r = run_one(scene, root / "runs" / scene.name, args.config, args.overrides, args.reuse)
         results[label] = r
         print(row(label, r), flush=True)
         if args.ablation:
-            variants = dict(ABLATIONS)
-            if cfa is not None:
-                variants = {k: v for k, v in COLOUR_ABLATIONS.items()}
+            variants = ABLATIONS if cfa is None else COLOUR_ABLATIONS
+            done = {settings_key(args.config, args.overrides): r}
             for name, ov in variants.items():
-                rr = run_one(scene, root / "runs" / f"{scene.name}_{name.replace(' ', '_')}",
-                             args.config, [*args.overrides, *ov])
+                key = settings_key(args.config, [*args.overrides, *ov])
+                if key not in done:  # a variant equal to an earlier run is not trained again
+                    out = root / "runs" / f"{scene.name}_{re.sub(r'[^A-Za-z0-9=.-]+', '_', name)}"
+                    done[key] = run_one(scene, out, args.config, [*args.overrides, *ov], args.reuse)
+                rr = done[key]
                 results[f"{label} {name}"] = rr
                 print(row(f"{label} {name}", rr), flush=True)
+    main_runs = {k: v for k, v in results.items() if k in {f"{pr} s{sd} {c or 'grey'}" for pr, sd, c in runs}}
+    if len(main_runs) > 1:
+        line, checks = mean_row(main_runs)
+        print(line)
+        print("\n".join(checks))
     (root / "results.json").write_text(json.dumps(results, indent=2))
     return 0
 

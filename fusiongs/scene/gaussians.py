@@ -185,12 +185,13 @@ class GaussianModel(nn.Module):
     @classmethod
     def random_in_frusta(cls, camera: PinholeCamera, c2w: torch.Tensor, n: int, near: float,
                          far: float, generator: torch.Generator, sh_degree: int = 3,
-                         **kwargs) -> GaussianModel:
+                         depth_sampling: str = "volume", **kwargs) -> GaussianModel:
         """Grey Gaussians at ``n`` points sampled uniformly in the camera frusta.
 
         See :func:`fusiongs.camera.frusta.sample_in_frusta` (``c2w`` ``[C, 4, 4]``, depths in
-        ``[near, far]``) and :meth:`from_points` (``kwargs``: init_opacity, init_scale, k). The
+        ``[near, far]``, ``depth_sampling``) and :meth:`from_points` (``kwargs``: init_opacity,
+        init_scale, k). The
         model is float32 on ``c2w``'s device.
         """
-        xyz = sample_in_frusta(camera, c2w, n, near, far, generator).float()
+        xyz = sample_in_frusta(camera, c2w, n, near, far, generator, depth_sampling).float()
         return cls.from_points(xyz, None, sh_degree, where="random init", **kwargs)

@@ -16,6 +16,7 @@ class InitSettings:
     n_points: int = 20000            # random Gaussians in the camera frusta
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
     depth_max: float = 12.0          # far bound of the sampled depths (scene units)
+    depth_sampling: Literal["volume", "depth", "disparity"] = "volume"  # density of sampled depths
     opacity: float = 0.1             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
 

@@ -71,7 +71,8 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         c2w = trajectory.c2w(t_init).to(torch.float32)
     model = GaussianModel.random_in_frusta(data.camera, c2w, cfg.init.n_points, cfg.init.depth_min,
                                            cfg.init.depth_max, generator=gen,
-                                           sh_degree=cfg.init.sh_degree, init_opacity=cfg.init.opacity)
+                                           sh_degree=cfg.init.sh_degree, init_opacity=cfg.init.opacity,
+                                           depth_sampling=cfg.init.depth_sampling)
     channels = 3 if data.cfa_index is not None else 1
     th = cfg.threshold
     threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,

@@ -44,3 +44,19 @@ def test_bad_depth_range_raises():
         sample_in_frusta(cam, c2w, 10, 2.0, 1.0, torch.Generator())
     with pytest.raises(InputError, match="c2w"):
         sample_in_frusta(cam, np.eye(4), 10, 1.0, 2.0, torch.Generator())
+
+
+@pytest.mark.parametrize("mode, median", [("depth", 2.5), ("disparity", 1.0 / ((1.0 + 0.25) / 2))])
+def test_depth_and_disparity_sampling_have_their_medians(mode, median):
+    cam, c2w = _setup()
+    p = sample_in_frusta(cam, c2w[:1], 20000, 1.0, 4.0, torch.Generator().manual_seed(5), mode)
+    assert float((p[:, 2] < median).float().mean()) == pytest.approx(0.5, abs=0.015)
+    assert float(p[:, 2].min()) >= 1.0 - 1e-5 and float(p[:, 2].max()) <= 4.0 + 1e-5
+
+
+def test_unknown_depth_sampling_raises():
+    cam, c2w = _setup()
+    with pytest.raises(InputError, match="depth_sampling"):
+        sample_in_frusta(cam, c2w, 10, 1.0, 2.0, torch.Generator(), "log")
+    with pytest.raises(InputError, match="near"):
+        sample_in_frusta(cam, c2w, 10, 0.0, 2.0, torch.Generator(), "disparity")
