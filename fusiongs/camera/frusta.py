@@ -7,7 +7,6 @@ import torch
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.errors import InputError
 
-
 DEPTH_SAMPLING = ("volume", "depth", "disparity")
 
 
