@@ -44,6 +44,7 @@ class History:
     theta_pos: list[list[float]] = field(default_factory=list)
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
+    step_seconds: list[float] = field(default_factory=list)  # wall time of each iteration
     seconds: float = 0.0
     render_seconds: float = 0.0      # rasteriser forward passes
     backward_seconds: float = 0.0    # backward through losses and rasteriser
@@ -179,6 +180,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
 
     try:
         for it in bar:
+            t_step = time.perf_counter()
             frame = int(order[it % len(order)])
             lam_ev = _event_weight(cfg, data, it)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
@@ -194,6 +196,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
             _record(history, it, float(loss.detach()), res.parts, state)
+            history.step_seconds.append(time.perf_counter() - t_step)
             if "psnr" in res.parts:  # running mean of the blurry-frame PSNR (re-rendered input)
                 p = res.parts["psnr"]
                 psnr_now = p if math.isnan(psnr_now) else 0.9 * psnr_now + 0.1 * p
