@@ -16,7 +16,7 @@ class InitSettings:
     n_points: int = 20000            # random Gaussians in the camera frusta
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
     depth_max: float = 12.0          # far bound of the sampled depths (scene units)
-    depth_sampling: Literal["volume", "depth", "disparity"] = "volume"  # density of sampled depths
+    depth_sampling: Literal["volume", "depth", "disparity"] = "depth"  # density of sampled depths
     opacity: float = 0.1             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
 
@@ -27,7 +27,7 @@ class BlurSettings:
     ssim_lambda: float = 0.2         # λ in (1-λ)·L1 + λ·(1-SSIM)
     weight: float = 1.0              # weight of the blur loss
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
-    coarse_until: int = 0            # before this iteration, and only while λ_ev = 0, render at
+    coarse_until: int = 1000         # before this iteration, and only while λ_ev = 0, render at
     coarse_factor: int = 2           # 1/coarse_factor resolution against area-downsampled frames
     crop: tuple[int, int] | None = None  # (w, h): render a random crop per step; None = whole frame
 
@@ -93,7 +93,7 @@ class EventOnlySettings:
 
 @dataclass
 class OptimSettings:
-    iterations: int = 3000
+    iterations: int = 1500
     lr_means: float = 1.6e-4         # times the scene extent
     lr_means_final: float = 1.6e-6   # exponential decay to this (times the scene extent)
     lr_scales: float = 5e-3
@@ -111,11 +111,11 @@ class OptimSettings:
 class DensifySettings:
     enabled: bool = True
     start: int = 300
-    stop: int = 2000
+    stop: int = 1300
     every: int = 100
     grad_threshold: float = 2e-4     # view-space gradient threshold (divided over the N renders)
     reset_opacity_every: int = 3000  # 0 disables; also disabled once events are on
-    max_gaussians: int = 200000
+    max_gaussians: int = 25000
 
 
 @dataclass
