@@ -54,9 +54,10 @@ def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, 
 
 
 def nearest_readout(times: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
-    """Index of the read-out in sorted ``times`` ``[R]`` nearest to each of ``t`` ``[...]``."""
+    """Index of the read-out in sorted ``times`` ``[R]`` nearest to each of ``t`` ``[...]`` (a tie
+    goes to the later one)."""
     idx = torch.searchsorted(times, t.contiguous()).clamp(1, len(times) - 1)
-    left_closer = (t - times[idx - 1]) <= (times[idx] - t)
+    left_closer = (t - times[idx - 1]) < (times[idx] - t)
     return torch.where(left_closer, idx - 1, idx)
 
 
@@ -145,9 +146,7 @@ def snap_to_readouts(windows: torch.Tensor, readouts: torch.Tensor, t_min: float
     Returns:
         ``(windows [W, 2], readout index [W])``; starts are clamped to ``t_min``.
     """
-    idx = torch.searchsorted(readouts, windows[:, 1].contiguous()).clamp(1, len(readouts) - 1)
-    left_closer = (windows[:, 1] - readouts[idx - 1]) < (readouts[idx] - windows[:, 1])
-    idx = torch.where(left_closer, idx - 1, idx)
+    idx = nearest_readout(readouts, windows[:, 1])
     t_b = readouts[idx]
     t_a = (t_b - (windows[:, 1] - windows[:, 0])).clamp(min=t_min)
     return torch.stack([t_a, t_b], dim=1), idx
