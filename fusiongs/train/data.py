@@ -83,11 +83,19 @@ def downsample_frames(frames: torch.Tensor, response: str, factor: int) -> torch
     in linear light."""
     from fusiongs.frames.response import linear_to_response, response_to_linear
 
+    return linear_to_response(block_mean(response_to_linear(frames, response), factor), response)
+
+
+def block_mean(images: torch.Tensor, factor: int) -> torch.Tensor:
+    """``[..., H, W, C]`` -> ``[..., H//f, W//f, C]``: means over ``f x f`` blocks (the last rows and
+    columns that do not fill a block are dropped)."""
     f = int(factor)
-    h, w = frames.shape[1] // f * f, frames.shape[2] // f * f
-    lin = response_to_linear(frames[:, :h, :w], response).permute(0, 3, 1, 2)
-    small = torch.nn.functional.avg_pool2d(lin, f).permute(0, 2, 3, 1)
-    return linear_to_response(small, response).contiguous()
+    h, w = images.shape[-3] // f * f, images.shape[-2] // f * f
+    x = images[..., :h, :w, :]
+    lead = x.shape[:-3]
+    x = x.reshape(-1, h, w, x.shape[-1]).permute(0, 3, 1, 2)
+    small = torch.nn.functional.avg_pool2d(x, f).permute(0, 2, 3, 1).contiguous()
+    return small.reshape(*lead, h // f, w // f, x.shape[1])
 
 
 def edi_images(scene: Scene, theta: float, device: torch.device) -> torch.Tensor:

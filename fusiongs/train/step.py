@@ -26,7 +26,7 @@ from fusiongs.losses.event import (
 from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.crop import Crop
-from fusiongs.train.data import TrainData
+from fusiongs.train.data import TrainData, block_mean
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
@@ -222,12 +222,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         parts["psnr"] = 10.0 * math.log10(1.0 / max(mse, 1e-12))
     lam_edi = edi_prior_weight(cfg, it)
     if has_frames and data.edi is not None and lam_edi > 0 and n % 2 == 1:
-        edi = data.edi[frame]
-        if coarse > 1:
-            h, w = edi.shape[0] // coarse * coarse, edi.shape[1] // coarse * coarse
-            edi = torch.nn.functional.avg_pool2d(edi[:h, :w].permute(2, 0, 1), coarse).permute(1, 2, 0)
-        else:
-            edi = crop.images(edi)
+        edi = block_mean(data.edi[frame], coarse) if coarse > 1 else crop.images(data.edi[frame])
         l_edi = edi_prior_loss(lin[n // 2], edi)
         loss = loss + lam_edi * l_edi
         parts["edi"] = float(l_edi.detach())
