@@ -13,12 +13,25 @@ from fusiongs.errors import ConfigError
 
 @dataclass
 class InitSettings:
-    n_points: int = 20000            # random Gaussians in the camera frusta
+    method: Literal["random", "stereo"] = "random"  # stereo: plane sweep on the EDI frames + random rest
+    n_points: int = 20000            # initial Gaussians (stereo points plus random ones in the frusta)
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
     depth_max: float = 12.0          # far bound of the sampled depths (scene units)
     depth_sampling: Literal["volume", "depth", "disparity"] = "depth"  # density of sampled depths
     opacity: float = 0.1             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
+    stereo_share: float = 0.8        # at most this share of n_points from stereo (the rest random)
+    stereo_planes: int = 48          # depth hypotheses of the plane sweep (uniform in 1/z)
+    stereo_min_confidence: float = 0.3  # drop pixels whose cost curve is flatter than this
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.stereo_share <= 1:
+            raise ConfigError("config", "init.stereo_share", "a number in [0, 1]", repr(self.stereo_share))
+        if self.stereo_planes < 2:
+            raise ConfigError("config", "init.stereo_planes", "an integer >= 2", repr(self.stereo_planes))
+        if not 0 <= self.stereo_min_confidence < 1:
+            raise ConfigError("config", "init.stereo_min_confidence", "a number in [0, 1)",
+                              repr(self.stereo_min_confidence))
 
 
 @dataclass

@@ -54,12 +54,53 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
     return 1.1 * (radius + depth_max)
 
 
+def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen: torch.Generator,
+                      images: torch.Tensor | None = None) -> GaussianModel:
+    """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
+
+    ``init.method = "stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames,
+    posed by ``c2w`` ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
+    ``stereo_share · n_points`` of the confident surface points, drawn uniformly, coloured by their
+    pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
+
+    Raises:
+        ConfigError: ``stereo`` without at least two images.
+    """
+    from fusiongs.camera.frusta import sample_in_frusta
+    from fusiongs.camera.stereo import stereo_points
+    from fusiongs.errors import ConfigError
+
+    ini = cfg.init
+    if ini.method == "random":
+        return GaussianModel.random_in_frusta(data.camera, c2w, ini.n_points, ini.depth_min,
+                                              ini.depth_max, generator=gen, sh_degree=ini.sh_degree,
+                                              init_opacity=ini.opacity, depth_sampling=ini.depth_sampling)
+    if images is None or images.shape[0] < 2:
+        raise ConfigError("config", "init.method", "'random' for a scene with fewer than 2 frames "
+                          "(stereo initialisation matches frames)", repr(ini.method))
+    xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, ini.depth_max,
+                                n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
+    n_stereo = min(xyz.shape[0], round(ini.stereo_share * ini.n_points))
+    pick = torch.randperm(xyz.shape[0], generator=gen)[:n_stereo]
+    rgb = rgb[pick].clamp(0.0, 1.0)
+    if rgb.shape[1] == 1:
+        rgb = rgb.expand(-1, 3)
+    rand = sample_in_frusta(data.camera, c2w.cpu(), ini.n_points - n_stereo, ini.depth_min,
+                            ini.depth_max, gen, ini.depth_sampling).float()
+    xyz = torch.cat([xyz[pick], rand]).to(c2w.device)
+    rgb = torch.cat([rgb, torch.full_like(rand, 0.5)]).to(c2w.device)
+    return GaussianModel.from_points(xyz, rgb, ini.sh_degree, init_opacity=ini.opacity,
+                                     where="stereo init")
+
+
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
-                device: torch.device, theta_init: float | None = None) -> FusionState:
-    """Initial state: random Gaussians in the frusta of the cameras at the frame times.
+                device: torch.device, theta_init: float | None = None,
+                init_images: torch.Tensor | None = None) -> FusionState:
+    """Initial state: Gaussians from :func:`initial_gaussians` with the cameras at the frame times.
 
     Args:
         theta_init: starting contrast threshold; ``cfg.threshold.init`` when None.
+        init_images: ``[F, H, W, C]`` linear images for ``init.method = "stereo"``.
     """
     theta_init = cfg.threshold.init if theta_init is None else theta_init
     gen = torch.Generator().manual_seed(cfg.seed)
@@ -69,10 +110,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         t_init = torch.linspace(data.t_range[0], data.t_range[1], 16, dtype=torch.float64)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
-    model = GaussianModel.random_in_frusta(data.camera, c2w, cfg.init.n_points, cfg.init.depth_min,
-                                           cfg.init.depth_max, generator=gen,
-                                           sh_degree=cfg.init.sh_degree, init_opacity=cfg.init.opacity,
-                                           depth_sampling=cfg.init.depth_sampling)
+    model = initial_gaussians(data, c2w, cfg, gen, init_images)
     channels = 3 if data.cfa_index is not None else 1
     th = cfg.threshold
     threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,

@@ -142,7 +142,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
-    if cfg.priors.edi_weight > 0 and data.events is not None and data.n_frames:
+    if (cfg.priors.edi_weight > 0 or cfg.init.method == "stereo") and data.events is not None \
+            and data.n_frames:
         data.edi = edi_images(scene, cfg.priors.edi_theta, device)
     if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
         eo = cfg.event_only
@@ -151,7 +152,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
-    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, initial_theta(scene, data, cfg))
+    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, initial_theta(scene, data, cfg),
+                        init_images(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
     start, history = 0, History()
     ckpt_path = out_dir / "checkpoint.pt"
@@ -223,6 +225,16 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
     flat = np.concatenate(instants) if instants else np.zeros(0)
     return pvc_readouts(data.events, flat, data.t_range, spacing, cfg.events.hpf_tau,
                         cfg.threshold.init, device)
+
+
+def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
+    """Images the stereo initialisation matches: the EDI frames when there are events, else the
+    (blurry) frames in linear light; None for the random initialisation or without frames."""
+    if cfg.init.method != "stereo" or data.n_frames == 0:
+        return None
+    if data.edi is not None:
+        return data.edi
+    return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))
 
 
 def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig) -> float:

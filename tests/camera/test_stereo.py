@@ -1,0 +1,152 @@
+"""Plane-sweep stereo against ray-cast truth, and the stereo initialisation of the Gaussians."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.stereo import (depth_from_cost, inverse_depth_planes, neighbour_indices,
+                                    plane_sweep_cost, stereo_points, unproject)
+from fusiongs.errors import ConfigError, InputError
+from fusiongs.sim.motion import make_trajectory
+from fusiongs.sim.presets import get_preset
+from fusiongs.sim.raycast import RayCaster, fov_focal
+
+
+@pytest.fixture(scope="module")
+def views():
+    """Sharp ray-cast views of the ``boxes`` world along its simulated motion, with true depth."""
+    preset = get_preset("boxes")
+    w, h = 64, 48
+    f = fov_focal(w, preset.hfov_deg)
+    cam = PinholeCamera(w, h, f, f, w / 2, h / 2)
+    traj = make_trajectory(preset.motion, 1.0, np.random.default_rng(0))
+    c2w = traj.c2w(np.linspace(0.0, 1.0, 7))
+    caster = RayCaster(preset.world, cam, 1, 0)
+    images = torch.stack([caster.render(m) for m in c2w])
+    depth = []
+    for m in c2w:
+        pts = caster.surface_points(m).double()
+        w2c = torch.linalg.inv(torch.as_tensor(m, dtype=torch.float64))
+        assert pts.shape[0] == w * h  # the box world is closed: every ray hits
+        depth.append((pts @ w2c[:3, :3].T + w2c[:3, 3])[:, 2].reshape(h, w))
+    return cam, torch.as_tensor(c2w), images, torch.stack(depth).float()
+
+
+def test_plane_sweep_recovers_true_depth(views):
+    cam, c2w, images, depth = views
+    planes = inverse_depth_planes(1.0, 12.0, 48)
+    cost = plane_sweep_cost(images[3], c2w[3], images[[1, 2, 4, 5]], c2w[[1, 2, 4, 5]], cam, planes)
+    assert cost.shape == (48, cam.height, cam.width)
+    est, conf = depth_from_cost(cost, planes)
+    rel = (est - depth[3]).abs() / depth[3]
+    sure = conf >= 0.3
+    assert sure.float().mean() > 0.6
+    assert rel[sure].median() < 0.05
+    assert (rel[sure] < 0.1).float().mean() > 0.8
+    # Confidence means something: the confident pixels are better than the rest.
+    assert rel[sure].median() <= rel.median()
+
+
+def test_wrong_poses_give_wrong_depth(views):
+    """The test above can fail: swapping the sources' poses breaks the geometry."""
+    cam, c2w, images, depth = views
+    planes = inverse_depth_planes(1.0, 12.0, 48)
+    cost = plane_sweep_cost(images[3], c2w[3], images[[1, 5]], c2w[[5, 1]], cam, planes)
+    est, _ = depth_from_cost(cost, planes)
+    assert ((est - depth[3]).abs() / depth[3]).median() > 0.1
+
+
+def test_sub_plane_refinement_finds_a_parabola_minimum():
+    planes = inverse_depth_planes(1.0, 4.0, 9)
+    inv = 1.0 / planes
+    true_inv = 0.5 * (inv[3] + inv[4]) + 0.1 * (inv[4] - inv[3])
+    cost = ((inv - true_inv) ** 2).float()[:, None, None].expand(9, 2, 3).contiguous()
+    d, conf = depth_from_cost(cost, planes)
+    assert torch.allclose(d, torch.full((2, 3), float(1 / true_inv)), rtol=1e-4)
+    assert bool((conf > 0.5).all())
+    flat, conf_flat = depth_from_cost(torch.ones(9, 2, 3), planes)
+    assert bool((conf_flat == 0).all())
+
+
+def test_unproject_inverts_projection():
+    cam = PinholeCamera(8, 6, 10.0, 11.0, 4.2, 2.9)
+    c2w = torch.eye(4, dtype=torch.float64)
+    c2w[:3, 3] = torch.tensor([0.5, -1.0, 2.0])
+    depth = torch.rand(6, 8) + 1
+    x = unproject(depth, c2w, cam).double() - c2w[:3, 3]
+    u = cam.fx * x[..., 0] / x[..., 2] + cam.cx
+    v = cam.fy * x[..., 1] / x[..., 2] + cam.cy
+    assert torch.allclose(u, torch.arange(8.0).double() + 0.5, atol=1e-4)
+    assert torch.allclose(v, (torch.arange(6.0).double() + 0.5)[:, None].expand(6, 8), atol=1e-4)
+    assert torch.allclose(x[..., 2], depth.double(), atol=1e-5)
+
+
+def test_stereo_points_are_on_surfaces_with_their_pixel_colour(views):
+    cam, c2w, images, depth = views
+    xyz, rgb, conf = stereo_points(images, c2w, cam, 1.0, 12.0, n_planes=32, min_confidence=0.3)
+    assert xyz.shape[0] == rgb.shape[0] == conf.shape[0] > 0.5 * images.shape[0] * cam.height * cam.width
+    assert bool((conf >= 0.3).all())
+    # Points re-project into view 3 at the true surface depth, or behind it (occluded there).
+    w2c = torch.linalg.inv(c2w[3].double())
+    p = xyz.double() @ w2c[:3, :3].T + w2c[:3, 3]
+    u = (cam.fx * p[:, 0] / p[:, 2] + cam.cx).floor().long()
+    v = (cam.fy * p[:, 1] / p[:, 2] + cam.cy).floor().long()
+    ok = (p[:, 2] > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)
+    rel = (p[ok, 2] - depth[3][v[ok], u[ok]].double()) / p[ok, 2]
+    assert rel.abs().median() < 0.05
+    assert (rel < -0.1).float().mean() < 0.1  # in front of the visible surface: wrong
+    assert set(rgb.reshape(-1).tolist()) <= set(images.reshape(-1).tolist())
+
+
+def test_neighbours_stay_inside():
+    assert neighbour_indices(5, 0, (-2, -1, 1, 2)) == [1, 2]
+    assert neighbour_indices(5, 4, (-2, -1, 1, 2)) == [2, 3]
+    assert neighbour_indices(5, 2, (0, 1, 1)) == [3]
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(near=3.0, far=2.0), "near/far"),
+    (dict(n_planes=1), "n_planes"),
+    (dict(min_confidence=1.0), "min_confidence"),
+])
+def test_bad_stereo_arguments_name_the_field(views, kwargs, field):
+    cam, c2w, images, _ = views
+    args = dict(near=1.0, far=12.0, n_planes=8, min_confidence=0.3) | kwargs
+    with pytest.raises(InputError, match=field):
+        stereo_points(images[:2], c2w[:2], cam, **args)
+
+
+def test_bad_images_name_the_field(views):
+    cam, c2w, images, _ = views
+    with pytest.raises(InputError, match="at least 2"):
+        stereo_points(images[:1], c2w[:1], cam, 1.0, 12.0)
+    with pytest.raises(InputError, match="images poses"):
+        stereo_points(images[:3], c2w[:2], cam, 1.0, 12.0)
+    with pytest.raises(InputError, match="window"):
+        plane_sweep_cost(images[0], c2w[0], images[1:2], c2w[1:2], cam, inverse_depth_planes(1, 2, 4), 4)
+
+
+def test_stereo_init_of_the_trainer(views):
+    """``init.method = stereo`` keeps at most stereo_share of n_points from stereo, coloured."""
+    from fusiongs.train.settings import DeblurConfig, InitSettings
+    from fusiongs.train.state import initial_gaussians
+
+    cam, c2w, images, _ = views
+
+    class Data:
+        camera = cam
+
+    cfg = DeblurConfig(init=InitSettings(method="stereo", n_points=1000, stereo_share=0.75,
+                                         stereo_planes=16))
+    model = initial_gaussians(Data, c2w.float(), cfg, torch.Generator().manual_seed(0), images)
+    assert model.n == 1000
+    colours = model.base_colors()
+    grey = (colours - 0.5).abs().amax(1) < 1e-6
+    assert int(grey.sum()) >= 250 - 5 and int((~grey).sum()) > 700
+    with pytest.raises(ConfigError, match="init.method"):
+        initial_gaussians(Data, c2w[:1].float(), cfg, torch.Generator(), images[:1])
+    with pytest.raises(ConfigError, match="init.stereo_share"):
+        InitSettings(stereo_share=1.5)
