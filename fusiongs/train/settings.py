@@ -13,14 +13,16 @@ from fusiongs.errors import ConfigError
 
 @dataclass
 class InitSettings:
-    method: Literal["random", "stereo"] = "random"  # stereo: plane sweep on the EDI frames + random rest
-    n_points: int = 20000            # initial Gaussians (stereo points plus random ones in the frusta)
+    # stereo: plane sweep on the EDI frames (or the frames without events) plus random points;
+    # auto: stereo with >= 2 frames, else random (event-only scenes, a single frame)
+    method: Literal["auto", "random", "stereo"] = "auto"
+    n_points: int = 10000            # initial Gaussians (stereo points plus random ones in the frusta)
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
     depth_max: float = 12.0          # far bound of the sampled depths (scene units)
     depth_sampling: Literal["volume", "depth", "disparity"] = "depth"  # density of sampled depths
-    opacity: float = 0.1             # initial opacity
+    opacity: float = 0.3             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
-    stereo_share: float = 0.8        # at most this share of n_points from stereo (the rest random)
+    stereo_share: float = 0.9        # at most this share of n_points from stereo (the rest random)
     stereo_planes: int = 48          # depth hypotheses of the plane sweep (uniform in 1/z)
     stereo_min_confidence: float = 0.3  # drop pixels whose cost curve is flatter than this
 
@@ -106,7 +108,7 @@ class EventOnlySettings:
 
 @dataclass
 class OptimSettings:
-    iterations: int = 1500
+    iterations: int = 1300
     lr_means: float = 1.6e-4         # times the scene extent
     lr_means_final: float = 1.6e-6   # exponential decay to this (times the scene extent)
     lr_scales: float = 5e-3
@@ -124,11 +126,11 @@ class OptimSettings:
 class DensifySettings:
     enabled: bool = True
     start: int = 300
-    stop: int = 1300
+    stop: int = 1100
     every: int = 100
     grad_threshold: float = 2e-4     # view-space gradient threshold (divided over the N renders)
     reset_opacity_every: int = 3000  # 0 disables; also disabled once events are on
-    max_gaussians: int = 25000
+    max_gaussians: int = 12000
 
 
 @dataclass

@@ -58,7 +58,7 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
                       images: torch.Tensor | None = None) -> GaussianModel:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
 
-    ``init.method = "stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames,
+    ``init.method = "auto"`` is ``"stereo"`` with two or more images, else ``"random"``. ``"stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames,
     posed by ``c2w`` ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
     ``stereo_share · n_points`` of the confident surface points, drawn uniformly, coloured by their
     pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
@@ -71,11 +71,12 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     from fusiongs.errors import ConfigError
 
     ini = cfg.init
-    if ini.method == "random":
+    n_images = 0 if images is None else images.shape[0]
+    if ini.method == "random" or (ini.method == "auto" and n_images < 2):
         return GaussianModel.random_in_frusta(data.camera, c2w, ini.n_points, ini.depth_min,
                                               ini.depth_max, generator=gen, sh_degree=ini.sh_degree,
                                               init_opacity=ini.opacity, depth_sampling=ini.depth_sampling)
-    if images is None or images.shape[0] < 2:
+    if n_images < 2:
         raise ConfigError("config", "init.method", "'random' for a scene with fewer than 2 frames "
                           "(stereo initialisation matches frames)", repr(ini.method))
     xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, ini.depth_max,

@@ -142,8 +142,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
-    if (cfg.priors.edi_weight > 0 or cfg.init.method == "stereo") and data.events is not None \
-            and data.n_frames:
+    if (cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)) \
+            and data.events is not None and data.n_frames:
         data.edi = edi_images(scene, cfg.priors.edi_theta, device)
     if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
         eo = cfg.event_only
@@ -230,7 +230,7 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
 def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
     """Images the stereo initialisation matches: the EDI frames when there are events, else the
     (blurry) frames in linear light; None for the random initialisation or without frames."""
-    if cfg.init.method != "stereo" or data.n_frames == 0:
+    if cfg.init.method == "random" or data.n_frames == 0:
         return None
     if data.edi is not None:
         return data.edi
