@@ -150,3 +150,25 @@ def test_stereo_init_of_the_trainer(views):
         initial_gaussians(Data, c2w[:1].float(), cfg, torch.Generator(), images[:1])
     with pytest.raises(ConfigError, match="init.stereo_share"):
         InitSettings(stereo_share=1.5)
+
+
+def test_auto_init_is_stereo_with_two_frames_and_random_otherwise(views):
+    from fusiongs.train.settings import DeblurConfig, InitSettings
+    from fusiongs.train.state import initial_gaussians
+
+    cam, c2w, images, _ = views
+
+    class Data:
+        camera = cam
+
+    def grey_share(method, n_images):
+        cfg = DeblurConfig(init=InitSettings(method=method, n_points=400, stereo_planes=8))
+        imgs = images[:n_images] if n_images else None
+        m = initial_gaussians(Data, c2w[:max(n_images, 1)].float(), cfg,
+                              torch.Generator().manual_seed(0), imgs)
+        return float(((m.base_colors() - 0.5).abs().amax(1) < 1e-6).float().mean())
+
+    assert grey_share("auto", 3) < 0.5       # stereo: coloured surface points
+    assert grey_share("auto", 1) == 1.0      # one frame: random grey points
+    assert grey_share("auto", 0) == 1.0      # no frames (event-only)
+    assert grey_share("random", 3) == 1.0
