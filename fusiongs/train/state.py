@@ -58,8 +58,9 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
                       images: torch.Tensor | None = None) -> GaussianModel:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
 
-    ``init.method = "auto"`` is ``"stereo"`` with two or more images, else ``"random"``. ``"stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames,
-    posed by ``c2w`` ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
+    ``init.method = "auto"`` is ``"stereo"`` with two or more images, else ``"random"``.
+    ``"stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames, posed by ``c2w``
+    ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
     ``stereo_share · n_points`` of the confident surface points, drawn uniformly, coloured by their
     pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
 

@@ -7,8 +7,14 @@ import pytest
 import torch
 
 from fusiongs.camera.pinhole import PinholeCamera
-from fusiongs.camera.stereo import (depth_from_cost, inverse_depth_planes, neighbour_indices,
-                                    plane_sweep_cost, stereo_points, unproject)
+from fusiongs.camera.stereo import (
+    depth_from_cost,
+    inverse_depth_planes,
+    neighbour_indices,
+    plane_sweep_cost,
+    stereo_points,
+    unproject,
+)
 from fusiongs.errors import ConfigError, InputError
 from fusiongs.sim.motion import make_trajectory
 from fusiongs.sim.presets import get_preset
