@@ -65,7 +65,7 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
 
     Raises:
-        ConfigError: ``stereo`` without at least two images.
+        ConfigError: ``stereo`` without at least two images, or with ``init.depth_min <= 0``.
     """
     from fusiongs.camera.frusta import sample_in_frusta
     from fusiongs.camera.stereo import stereo_points
@@ -80,6 +80,9 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     if n_images < 2:
         raise ConfigError("config", "init.method", "'random' for a scene with fewer than 2 frames "
                           "(stereo initialisation matches frames)", repr(ini.method))
+    if ini.depth_min <= 0:
+        raise ConfigError("config", "init.depth_min", "a depth > 0 for the stereo initialisation "
+                          "(its planes are uniform in 1/depth)", repr(ini.depth_min))
     xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, ini.depth_max,
                                 n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
     n_stereo = min(xyz.shape[0], round(ini.stereo_share * ini.n_points))

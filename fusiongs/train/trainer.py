@@ -142,9 +142,12 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
-    if (cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)) \
-            and data.events is not None and data.n_frames:
-        data.edi = edi_images(scene, cfg.priors.edi_theta, device)
+    theta0 = initial_theta(scene, data, cfg)
+    wants_edi = cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)
+    if wants_edi and data.events is not None and data.n_frames:
+        # θ of the EDI images: configured, else the consecutive-frame estimate (reused, not redone)
+        data.edi = edi_images(scene, cfg.priors.edi_theta or (theta0 if _estimates_theta(cfg, data)
+                                                               else 0.0), device)
     if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
         eo = cfg.event_only
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
@@ -152,7 +155,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
-    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, initial_theta(scene, data, cfg),
+    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0,
                         init_images(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
     start, history = 0, History()
@@ -237,10 +240,15 @@ def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tenso
     return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))
 
 
+def _estimates_theta(cfg: DeblurConfig, data: TrainData) -> bool:
+    """Whether θ starts from the EDI consecutive-frame estimate (enabled, events, >= 2 frames)."""
+    return bool(cfg.threshold.estimate and data.events is not None and data.n_frames >= 2)
+
+
 def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig) -> float:
     """θ to start from: the EDI consecutive-frame estimate when enabled and possible, else the
     configured ``threshold.init`` (METHOD.md §4-5)."""
-    if not (cfg.threshold.estimate and data.events is not None and data.n_frames >= 2):
+    if not _estimates_theta(cfg, data):
         return cfg.threshold.init
     from fusiongs.eval.edi import estimate_theta_sequence
 

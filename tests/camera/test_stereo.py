@@ -154,6 +154,9 @@ def test_stereo_init_of_the_trainer(views):
     assert int(grey.sum()) >= 250 - 5 and int((~grey).sum()) > 700
     with pytest.raises(ConfigError, match="init.method"):
         initial_gaussians(Data, c2w[:1].float(), cfg, torch.Generator(), images[:1])
+    bad_near = DeblurConfig(init=InitSettings(method="stereo", depth_min=0.0))
+    with pytest.raises(ConfigError, match="init.depth_min"):
+        initial_gaussians(Data, c2w.float(), bad_near, torch.Generator(), images)
     with pytest.raises(ConfigError, match="init.stereo_share"):
         InitSettings(stereo_share=1.5)
 
