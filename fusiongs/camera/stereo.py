@@ -70,7 +70,7 @@ def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor
     if window < 1 or window % 2 == 0:
         raise InputError(WHERE, "window", "an odd number of pixels >= 1", window)
     gamma = 1 / 2.2
-    r = ref.clamp_min(0).pow(gamma).float()                             # [H, W, C]
+    r = ref.clamp_min(0).pow(gamma).float().permute(2, 0, 1)[None]      # [1, C, H, W]
     s = src.clamp_min(0).pow(gamma).float().permute(0, 3, 1, 2)         # [S, C, H, W]
     rays = _pixel_rays(camera).reshape(-1, 3)                           # [P, 3]
     ref_c2w, src_c2w = ref_c2w.double(), src_c2w.double()
@@ -90,7 +90,7 @@ def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor
         inside = front & (u >= 0) & (u <= w) & (v >= 0) & (v <= h)
         grid = torch.stack([2 * u / w - 1, 2 * v / h - 1], -1).float().reshape(-1, h, w, 2)
         warped = F.grid_sample(s, grid, mode="bilinear", padding_mode="border", align_corners=False)
-        diff = (warped - r.permute(2, 0, 1)[None]).abs().mean(1)        # [S, H, W]
+        diff = (warped - r).abs().mean(1)                               # [S, H, W]
         diff = torch.where(inside.reshape(-1, h, w), diff, torch.full_like(diff, float("inf")))
         best = diff.topk(keep, dim=0, largest=False).values             # [keep, H, W]
         out[k] = best.mean(0)
