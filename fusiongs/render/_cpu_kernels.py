@@ -26,12 +26,24 @@ T_STOP = 1e-4
 
 
 @njit(cache=True, inline="always")
+def alpha_limit(o):  # pragma: no cover - numba
+    """Bound on the Mahalanobis term ``d^T Σ^-1 d`` where opacity o can still give alpha 1/255,
+    with a small margin against rounding."""
+    return 2.0 * math.log(o / ALPHA_T) * (1.0 + 1e-6) + 1e-6
+
+
+@njit(cache=True, inline="always")
 def _row_range(k, c, g, y, box, mx, my, ca, cb, cc, op):  # pragma: no cover - numba
     """Inclusive x-range of row ``y`` where entry k may reach alpha 1/255 (x1 < x0 if none)."""
+    return row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, alpha_limit(op[c, g]))
+
+
+@njit(cache=True, inline="always")
+def row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim):  # pragma: no cover - numba
+    """:func:`_row_range` with the :func:`alpha_limit` of the entry given."""
     dy = my[c, g] - (y + 0.5)
     a = ca[c, g]
     b = cb[c, g]
-    lim = 2.0 * math.log(op[c, g] / ALPHA_T) * (1.0 + 1e-6) + 1e-6  # margin against rounding
     disc = (b * dy) ** 2 - a * (cc[c, g] * dy * dy - lim)
     if disc < 0.0 or a <= 0.0:
         return 0, -1

@@ -1,4 +1,8 @@
-"""CPU compositing backend: the numba kernels of ``_cpu_kernels`` behind a torch autograd Function."""
+"""CPU compositing backend: numba kernels behind a torch autograd Function.
+
+Float32 inputs use the SIMD kernels of ``_cpu_simd``; float64 inputs the scalar kernels of
+``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on).
+"""
 
 from __future__ import annotations
 
@@ -7,12 +11,18 @@ import torch
 from torch import Tensor
 
 from fusiongs.render import _cpu_kernels as K
+from fusiongs.render import _cpu_simd as S
 from fusiongs.render._boxes import pixel_boxes, sorted_visible
 from fusiongs.render.projection import Projected
 
 
 def _np(t: Tensor) -> np.ndarray:
     return t.detach().contiguous().numpy()
+
+
+def _use_simd(dtype, n_entries: int) -> bool:
+    """The float32 SIMD kernels for float32 (entry indices must fit int32), else the scalar ones."""
+    return dtype == np.float32 and n_entries < 2**31
 
 
 class CompositeCPU(torch.autograd.Function):
@@ -36,28 +46,31 @@ class CompositeCPU(torch.autograd.Function):
                 np.ascontiguousarray(con[..., 2]), _np(opacities).astype(npd, copy=False))
         col = _np(colors)
         ids_np, box_np, off_np = _np(ids), _np(box), _np(cam_off)
+        simd = _use_simd(npd, len(ids_np))
+        if simd:  # the SIMD kernels take the per-entry alpha limits after the opacities
+            arrs = arrs + (S.alpha_limits(arrs[5]),)
         row_off, rows, entry_row0 = K.row_lists(box_np, off_np, height)
         img = np.zeros((C, height, width, D), npd)
         tfin = np.empty((C, height, width), npd)
         last = np.empty((C, height, width), np.int64)
-        K.forward(ids_np, box_np, row_off, rows, *arrs, col, height, width, img, tfin, last)
+        (S if simd else K).forward(ids_np, box_np, row_off, rows, *arrs, col, height, width, img, tfin, last)
         ctx.saved = (ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width,
-                     height)
+                     height, simd)
         img_t = torch.from_numpy(img)
         alpha_t = torch.from_numpy(1.0 - tfin).unsqueeze(-1)
         return img_t, alpha_t
 
     @staticmethod
     def backward(ctx, v_img, v_alpha):
-        ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width, height = \
-            ctx.saved
+        (ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width, height,
+         simd) = ctx.saved
         C, N, D = col.shape
         npd = col.dtype
         v_img_np = _np(v_img).astype(npd, copy=False)
         v_alpha_np = np.ascontiguousarray(_np(v_alpha)[..., 0].astype(npd, copy=False))
         gbuf = np.zeros((int(entry_row0[-1]), 6 + D), npd)
-        K.backward(ids_np, box_np, row_off, rows, entry_row0, *arrs, col, height, width, tfin, last,
-                   v_img_np, v_alpha_np, gbuf)
+        (S if simd else K).backward(ids_np, box_np, row_off, rows, entry_row0, *arrs, col, height,
+                                    width, tfin, last, v_img_np, v_alpha_np, gbuf)
         out = np.zeros((C, N, 6 + D), npd)
         K.reduce_grads(ids_np, off_np, entry_row0, gbuf, out)
         g = torch.from_numpy(out)

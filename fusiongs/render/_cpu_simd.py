@@ -1,0 +1,246 @@
+"""Float32 SIMD variants of the numba compositing kernels (same results as ``_cpu_kernels``).
+
+The per-row work is the same as in :mod:`fusiongs.render._cpu_kernels` (one parallel task per image
+row, entries front to back, the classic 3DGS backward walking them back to front), but the loop
+over a Gaussian's pixels in a row is written without branches so that LLVM vectorises it (16
+float32 lanes with AVX-512, 8 with AVX2):
+
+- every early ``continue`` becomes a mask, and a masked-out pixel gets weight 0, so stores need
+  no condition (``s' = a·c + (1 − a)·s`` is exactly ``s`` for ``a = 0``);
+- ``exp`` is :func:`exp_neg_f32`, a polynomial with a bit-built power of two (libm's scalar ``exp``
+  does not vectorise); relative error below 1e-7, the float32 rounding level;
+- pixel indices are unsigned, which removes numba's negative-index wrap-around that otherwise keeps
+  LLVM from proving a load and a store hit the same element, and the error model is numpy's, so
+  that a division carries no ZeroDivisionError branch;
+- colours are handled one channel at a time over row buffers laid out ``[D, W]``;
+- the forward pass shrinks each row's span to the pixels still below the stop transmittance.
+
+The float64 kernels of ``_cpu_kernels`` remain the reference (gradcheck runs on them); the parity of
+these kernels with them is tested in ``tests/render/test_cpu_simd.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.extending import intrinsic
+
+from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, row_range_lim
+
+F = np.float32
+U = np.uint64
+# exp(r) ≈ 1 + r + r² q(r) on |r| <= ln2 / 2, q fitted by weighted least squares on Chebyshev
+# nodes (relative error 6.5e-8 in float32).
+Q0, Q1, Q2, Q3, Q4, Q5 = (F(5.0000000e-01), F(1.6666666e-01), F(4.1666269e-02), F(8.3334297e-03),
+                          F(1.3946021e-03), F(1.9826496e-04))
+LOG2E = F(1.4426950408889634)
+LN2_HI = F(0.693359375)  # ln 2 split so that n · LN2_HI is exact for |n| < 2^15
+LN2_LO = F(-2.1219444005469057e-04)
+LANES = 16  # pixels per block: one AVX-512 register of float32
+SIGMA_MAX = F(80.0)  # exp(-80) ~ 2e-35: still a normal float32, and far below any alpha cut
+
+
+@intrinsic
+def _int32_bits_as_float32(typingctx, x):
+    """Reinterpret the bits of an int32 as a float32 (vectorises to nothing)."""
+    sig = types.float32(types.int32)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.FloatType())
+
+    return sig, codegen
+
+
+@njit(cache=True, inline="always", fastmath={"contract"})
+def exp_neg_f32(s):  # pragma: no cover - numba
+    """``exp(-s)`` in float32 for ``0 <= s <= 80``: ``2^n · exp(r)``, ``-s = n ln 2 + r``."""
+    x = -s
+    n = np.int32(x * LOG2E + F(128.5)) - np.int32(128)  # round to nearest; x * LOG2E > -128
+    nf = F(n)
+    r = (x - nf * LN2_HI) - nf * LN2_LO
+    q = ((((Q5 * r + Q4) * r + Q3) * r + Q2) * r + Q1) * r + Q0
+    p = (q * r) * r + r + F(1.0)
+    return p * _int32_bits_as_float32((n + np.int32(127)) << np.int32(23))
+
+
+def alpha_limits(op: np.ndarray) -> np.ndarray:
+    """``[C, N]`` float64 ``_cpu_kernels.alpha_limit`` of each opacity (once per render, not per
+    row; opacities below 1/255 belong to culled entries and get the limit of 1/255)."""
+    o = np.maximum(op.astype(np.float64), ALPHA_T)
+    return 2.0 * np.log(o / ALPHA_T) * (1.0 + 1e-6) + 1e-6
+
+
+@njit(cache=True, parallel=True, fastmath={"contract"}, error_model="numpy")
+def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, width,
+            img, tfin, last):  # pragma: no cover - numba
+    """``_cpu_kernels.forward`` for float32 arrays, plus ``lim`` from :func:`alpha_limits`."""
+    D = col.shape[2]
+    for task in prange(row_off.shape[0] - 1):
+        c = task // height
+        y = task % height
+        wp = width + LANES  # row buffers padded for whole blocks of LANES pixels
+        trow = np.ones(wp, np.float32)
+        alive = np.ones(wp, np.float32)  # 1 until the pixel's transmittance would hit T_STOP
+        lrow = np.full(wp, -1, np.int32)
+        wbuf = np.zeros(wp, np.float32)
+        acc = np.zeros((D, wp), np.float32)
+        lo, hi = 0, width - 1  # span of pixels still alive
+        py = F(y) + F(0.5)
+        for r in range(row_off[task], row_off[task + 1]):
+            k = rows[r]
+            g = ids[k]
+            x0, x1 = row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim[c, g])
+            x0 = max(x0, lo)
+            x1 = min(x1, hi)
+            if x1 < x0:
+                continue
+            dy = my[c, g] - py
+            ha = F(0.5) * ca[c, g]
+            bdy = cb[c, g] * dy
+            cyy = F(0.5) * cc[c, g] * dy * dy
+            o = op[c, g]
+            mxg = mx[c, g] - F(0.5)
+            kk = np.int32(k)
+            xe = U(x1)
+            n_stop = 0
+            for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                for lane in range(U(LANES)):
+                    x = blk + lane
+                    dx = mxg - F(x)
+                    sigma = (ha * dx + bdy) * dx + cyy
+                    sc = sigma if sigma > F(0.0) else F(0.0)
+                    sc = sc if sc < SIGMA_MAX else SIGMA_MAX
+                    alpha = o * exp_neg_f32(sc)
+                    alpha = alpha if alpha < F(MAX_A) else F(MAX_A)
+                    t = trow[x]
+                    nt = t * (F(1.0) - alpha)
+                    hit = (x <= xe) & (sigma >= F(0.0)) & (alpha >= F(ALPHA_T)) & (alive[x] > F(0.0))
+                    stop = hit & (nt <= F(T_STOP))
+                    use = hit & (nt > F(T_STOP))
+                    wbuf[x] = alpha * t if use else F(0.0)
+                    trow[x] = nt if use else t
+                    alive[x] = F(0.0) if stop else alive[x]
+                    lrow[x] = kk if use else lrow[x]
+                    n_stop += 1 if stop else 0
+            for d in range(D):
+                cd = col[c, g, d]
+                for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                    for lane in range(U(LANES)):
+                        x = blk + lane
+                        acc[d, x] += wbuf[x] * cd
+            if n_stop > 0:
+                while lo <= hi and alive[lo] == F(0.0):
+                    lo += 1
+                while hi >= lo and alive[hi] == F(0.0):
+                    hi -= 1
+                if lo > hi:
+                    break
+        for x in range(width):
+            tfin[c, y, x] = trow[x]
+            last[c, y, x] = lrow[x]
+            for d in range(D):
+                img[c, y, x, d] = acc[d, x]
+
+
+@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"}, error_model="numpy")
+def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, col, height, width,
+             tfin, last, v_img, v_alpha, gbuf):  # pragma: no cover - numba
+    """``_cpu_kernels.backward`` for float32 arrays, plus ``lim`` (sums reassociated)."""
+    D = col.shape[2]
+    for task in prange(row_off.shape[0] - 1):
+        c = task // height
+        y = task % height
+        wp = width + LANES  # padded as in the forward pass
+        trow = np.ones(wp, np.float32)    # transmittance in front of the current entry
+        varow = np.zeros(wp, np.float32)  # v_alpha · T_final
+        lrow = np.full(wp, -1, np.int32)
+        vrow = np.zeros((D, wp), np.float32)
+        srow = np.zeros((D, wp), np.float32)  # colour composited behind the current entry
+        abuf = np.zeros(wp, np.float32)   # alpha of the entry (0 where it does not count)
+        tbuf = np.zeros(wp, np.float32)   # T in front of the entry (0 where it does not count)
+        ibuf = np.zeros(wp, np.float32)   # 1 / (1 - alpha) (0 where it does not count)
+        gbx = np.zeros(wp, np.float32)    # exp(-sigma), 0 where no gradient reaches the entry
+        vabuf = np.zeros(wp, np.float32)  # dL/dalpha before the T factor
+        for x in range(width):
+            trow[x] = tfin[c, y, x]
+            varow[x] = v_alpha[c, y, x] * tfin[c, y, x]
+            lrow[x] = last[c, y, x]
+            for d in range(D):
+                vrow[d, x] = v_img[c, y, x, d]
+        py = F(y) + F(0.5)
+        for r in range(row_off[task + 1] - 1, row_off[task] - 1, -1):
+            k = rows[r]
+            g = ids[k]
+            e = entry_row0[k] + y - box[k, 2]
+            x0, x1 = row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim[c, g])
+            if x1 < x0:
+                continue  # gbuf starts zeroed
+            dy = my[c, g] - py
+            a = ca[c, g]
+            b = cb[c, g]
+            cz = cc[c, g]
+            ha = F(0.5) * a
+            bdy = b * dy
+            cyy = F(0.5) * cz * dy * dy
+            o = op[c, g]
+            mxg = mx[c, g] - F(0.5)
+            kk = np.int32(k)
+            xe = U(x1)
+            for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                for lane in range(U(LANES)):
+                    x = blk + lane
+                    dx = mxg - F(x)
+                    sigma = (ha * dx + bdy) * dx + cyy
+                    sc = sigma if sigma > F(0.0) else F(0.0)
+                    sc = sc if sc < SIGMA_MAX else SIGMA_MAX
+                    gauss = exp_neg_f32(sc)
+                    og = o * gauss
+                    alpha = og if og < F(MAX_A) else F(MAX_A)
+                    valid = (x <= xe) & (kk <= lrow[x]) & (sigma >= F(0.0)) & (alpha >= F(ALPHA_T))
+                    inv = F(1.0) / (F(1.0) - alpha)
+                    t = trow[x] * inv
+                    abuf[x] = alpha if valid else F(0.0)
+                    tbuf[x] = t if valid else F(0.0)
+                    ibuf[x] = inv if valid else F(0.0)
+                    trow[x] = t if valid else trow[x]
+                    gbx[x] = gauss if valid & (og <= F(MAX_A)) else F(0.0)
+                    vabuf[x] = F(0.0)
+            for d in range(D):
+                cd = col[c, g, d]
+                g_col = F(0.0)
+                for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                    for lane in range(U(LANES)):
+                        x = blk + lane
+                        vc = vrow[d, x]
+                        al = abuf[x]
+                        g_col += al * tbuf[x] * vc
+                        vabuf[x] += (cd - srow[d, x]) * vc
+                        srow[d, x] = al * cd + (F(1.0) - al) * srow[d, x]
+                gbuf[e, 6 + d] = g_col
+            g_mx = F(0.0)
+            g_my = F(0.0)
+            g_a = F(0.0)
+            g_b = F(0.0)
+            g_c = F(0.0)
+            g_o = F(0.0)
+            for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                for lane in range(U(LANES)):
+                    x = blk + lane
+                    dx = mxg - F(x)
+                    gs = gbx[x]
+                    va = vabuf[x] * tbuf[x] + varow[x] * ibuf[x]
+                    g_o += gs * va
+                    vs = -o * gs * va
+                    g_a += F(0.5) * dx * dx * vs
+                    g_b += dx * dy * vs
+                    g_c += F(0.5) * dy * dy * vs
+                    g_mx += (a * dx + b * dy) * vs
+                    g_my += (b * dx + cz * dy) * vs
+            gbuf[e, 0] = g_mx
+            gbuf[e, 1] = g_my
+            gbuf[e, 2] = g_a
+            gbuf[e, 3] = g_b
+            gbuf[e, 4] = g_c
+            gbuf[e, 5] = g_o
+
