@@ -4,7 +4,9 @@ Cases: (2k Gaussians, 64x64), (10k, 128x128), (50k, 256x256); random Gaussians f
 depth 2.5-3.5, fx = width, scale calibrated so that about 15 Gaussians contribute per pixel (the
 measured mean is printed). Each measurement is forward + backward of an MSE loss to a random target,
 with gradients for means, quats, scales, opacities and colours. Compared in the same run with a
-simple tiled pure-torch compositor (``tiled_reference.py``, 16x16 tiles, dense per-tile lists).
+simple tiled pure-torch compositor (``tiled_reference.py``, 16x16 tiles, dense per-tile lists) and
+with the "cpu" backend forced onto its scalar kernels (``cpu-scalar``: the path before the float32
+SIMD kernels of ``fusiongs/render/_cpu_simd.py``).
 
 Timing: median of repeated runs after warm-up, 2 torch threads and 2 numba threads, with
 ``OMP_WAIT_POLICY=PASSIVE`` (set below unless already set): torch's and numba's OpenMP thread
@@ -25,6 +27,7 @@ import statistics
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 # torch's and numba's OpenMP pools both spin-wait by default and fight over 2 cores; must be set
@@ -37,6 +40,7 @@ import torch  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from tiled_reference import composite_tiled  # noqa: E402
 
+import fusiongs.render.cpu as cpu_backend  # noqa: E402
 from fusiongs.render import rasterize  # noqa: E402
 from fusiongs.render.pairs import drawn_pairs  # noqa: E402
 from fusiongs.render.projection import project_gaussians  # noqa: E402
@@ -78,8 +82,22 @@ def calibrate(n: int, size: int) -> float:
     return (lo * hi) ** 0.5
 
 
+@contextmanager
+def scalar_kernels():
+    """The "cpu" backend on its scalar kernels for float32 too (for comparison only)."""
+    saved = cpu_backend._use_simd
+    cpu_backend._use_simd = lambda dtype, n_entries: False
+    try:
+        yield
+    finally:
+        cpu_backend._use_simd = saved
+
+
 def step(s: dict, backend: str) -> None:
     """One forward + backward of an MSE loss."""
+    if backend == "cpu-scalar":
+        with scalar_kernels():
+            return step(s, "cpu")
     p = {k: s[k].clone().requires_grad_(True) for k in ("means", "quats", "scales", "opacities", "colors")}
     size = s["size"]
     if backend == "tiled":
@@ -137,7 +155,7 @@ def main() -> None:
         s = make_scene(n, size, k)
         ppp = pairs_per_pixel(s)
         reps = 3 if args.quick else (15 if n <= 10000 else 7)
-        ms = {b: time_ms(s, b, reps) for b in ("torch", "cpu", "tiled")}
+        ms = {b: time_ms(s, b, reps) for b in ("torch", "cpu", "cpu-scalar", "tiled")}
         mem = {}
         for b in ("cpu", "torch", "tiled"):
             out = subprocess.run([sys.executable, __file__, "--mem", b, str(n), str(size), str(k)],
@@ -147,12 +165,13 @@ def main() -> None:
         print(f"{name}: k={k:.3f} pairs/px={ppp:.1f}", file=sys.stderr)
     print(f"threads: torch {THREADS}, numba {THREADS}; peak MB = extra peak RSS of one fwd+bwd "
           "(cpu / torch / tiled-ref)")
-    print("| case | N | px | pairs/px | torch ms | cpu ms | tiled-ref ms | target ms | peak MB |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| case | N | px | pairs/px | torch ms | cpu ms | cpu-scalar ms | tiled-ref ms | target ms "
+          "| peak MB |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, n, px, ms, target, mem, ppp in rows:
         print(f"| {name} | {n} | {px} | {ppp:.1f} | {ms['torch']:.1f} | {ms['cpu']:.1f} | "
-              f"{ms['tiled']:.1f} | {target:.0f} | {mem['cpu']:.0f} / {mem['torch']:.0f} / "
-              f"{mem['tiled']:.0f} |")
+              f"{ms['cpu-scalar']:.1f} | {ms['tiled']:.1f} | {target:.0f} | {mem['cpu']:.0f} / "
+              f"{mem['torch']:.0f} / {mem['tiled']:.0f} |")
 
 
 if __name__ == "__main__":

@@ -13,7 +13,9 @@ float32 lanes with AVX-512, 8 with AVX2):
   LLVM from proving a load and a store hit the same element, and the error model is numpy's, so
   that a division carries no ZeroDivisionError branch;
 - colours are handled one channel at a time over row buffers laid out ``[D, W]``;
-- the forward pass shrinks each row's span to the pixels still below the stop transmittance.
+- the forward pass shrinks each row's span to the pixels still below the stop transmittance, and
+  the backward pass skips, before any per-pixel work, entries behind the last contributing entry of
+  every pixel they cover (most entries of saturated rows).
 
 The float64 kernels of ``_cpu_kernels`` remain the reference (gradcheck runs on them); the parity of
 these kernels with them is tested in ``tests/render/test_cpu_simd.py``.
@@ -162,20 +164,29 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, c
         ibuf = np.zeros(wp, np.float32)   # 1 / (1 - alpha) (0 where it does not count)
         gbx = np.zeros(wp, np.float32)    # exp(-sigma), 0 where no gradient reaches the entry
         vabuf = np.zeros(wp, np.float32)  # dL/dalpha before the T factor
+        row_last = -1  # the deepest entry that reaches any pixel of the row
         for x in range(width):
             trow[x] = tfin[c, y, x]
             varow[x] = v_alpha[c, y, x] * tfin[c, y, x]
             lrow[x] = last[c, y, x]
+            row_last = max(row_last, last[c, y, x])
             for d in range(D):
                 vrow[d, x] = v_img[c, y, x, d]
         py = F(y) + F(0.5)
         for r in range(row_off[task + 1] - 1, row_off[task] - 1, -1):
             k = rows[r]
+            if k > row_last:
+                continue  # behind every pixel's last entry: no gradient (gbuf starts zeroed)
             g = ids[k]
             e = entry_row0[k] + y - box[k, 2]
             x0, x1 = row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim[c, g])
             if x1 < x0:
-                continue  # gbuf starts zeroed
+                continue
+            reach = np.int32(-1)
+            for x in range(U(x0), U(x1 + 1)):
+                reach = max(reach, lrow[x])
+            if np.int32(k) > reach:
+                continue  # behind the last entry of each pixel in its range
             dy = my[c, g] - py
             a = ca[c, g]
             b = cb[c, g]

@@ -13,10 +13,12 @@ rendered in one call with ``C = N`` cameras, ``n_cameras`` already covers it: pa
 
 At refinement steps Gaussians with mean gradient ``> grow_grad2d`` are cloned (if their largest
 scale is ``<= grow_scale3d * scene_scale``) or split into 2 (otherwise): children means are
-sampled from the Gaussian, scales divided by 1.6. Then Gaussians with opacity
-``< prune_opacity`` are removed, and after the first opacity reset also those with largest scale
-``> prune_scale3d * scene_scale``. Every ``reset_opacity_every`` steps opacities are clamped to
-``2 * prune_opacity`` (disable with ``reset_opacity_every=0`` or
+sampled from the Gaussian, scales divided by 1.6. With ``max_gaussians > 0`` each of them adds one
+Gaussian, and when there are more candidates than room below the cap, only those with the largest
+mean gradients grow, so the count never exceeds the cap (pruning then frees room again). Then
+Gaussians with opacity ``< prune_opacity`` are removed, and after the first opacity reset also
+those with largest scale ``> prune_scale3d * scene_scale``. Every ``reset_opacity_every`` steps
+opacities are clamped to ``2 * prune_opacity`` (disable with ``reset_opacity_every=0`` or
 :meth:`DensifyStrategy.disable_opacity_reset`, e.g. once the event loss is on: Event-3DGS).
 """
 
@@ -65,6 +67,7 @@ class DensifyConfig:
     reset_opacity_every: int = 3000
     pause_refine_after_reset: int = 0
     split_scale_factor: float = 1.6
+    max_gaussians: int = 0  # growth stops at this many Gaussians (0: no cap); see _grow
 
 
 @dataclass(frozen=True)
@@ -189,6 +192,8 @@ class DensifyStrategy:
         clone, split = high & small, high & ~small
         if step < cfg.refine_scale2d_stop:
             split |= self.max_radii > cfg.grow_scale2d
+        if cfg.max_gaussians > 0:
+            clone, split = self._within_cap(clone, split, model.n)
         params = model.parameter_groups()
         new = {name: torch.cat([params[name][clone]] + [params[name][split]] * 2) for name in PARAM_NAMES}
         # Split children: means sampled from N(mu, R S^2 R^T), scales / 1.6 (3DGS §5).
@@ -203,6 +208,19 @@ class DensifyStrategy:
         mr = self.max_radii
         self.max_radii = torch.cat([mr[~split], mr[clone], mr[split], mr[split]])
         return n_clone, int(split.sum())
+
+    def _within_cap(self, clone: torch.Tensor, split: torch.Tensor, n: int
+                    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Keep the ``max_gaussians - n`` grow candidates with the largest mean gradients."""
+        grow = clone | split
+        room = max(self.config.max_gaussians - n, 0)
+        if int(grow.sum()) <= room:
+            return clone, split
+        cand = grow.nonzero().squeeze(1)
+        score = (self.grad2d / self.count.clamp_min(1))[cand]
+        keep = torch.zeros_like(grow)
+        keep[cand[torch.topk(score, room).indices]] = True
+        return clone & keep, split & keep
 
     @torch.no_grad()
     def _prune(self, model: GaussianModel, optimizers: Optimizers, step: int) -> int:

@@ -44,12 +44,14 @@ class BlurSettings:
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
     coarse_until: int = 1000         # before this iteration, and only while λ_ev = 0, render at
     coarse_factor: int = 2           # 1/coarse_factor resolution against area-downsampled frames
+    coarse_n_samples: int | None = None  # N of the coarse steps (None: n_samples); blur trails are
+                                     # coarse_factor times shorter in coarse pixels
     crop: tuple[int, int] | None = None  # (w, h): render a random crop per step; None = whole frame
 
     def __post_init__(self) -> None:
-        for name in ("n_samples", "coarse_factor"):
+        for name in ("n_samples", "coarse_factor", "coarse_n_samples"):
             v = getattr(self, name)
-            if v < 1:
+            if v is not None and v < 1:
                 raise ConfigError("config", f"blur.{name}", "an integer >= 1", repr(v))
         if self.crop is not None and min(self.crop) < 16:
             raise ConfigError("config", "blur.crop", "null or [w, h] with w, h >= 16 pixels",
@@ -130,8 +132,13 @@ class DensifySettings:
     every: int = 100
     grad_threshold: float = 2e-4     # view-space gradient threshold (divided over the N renders)
     reset_opacity_every: int = 3000  # 0 disables; also disabled once events are on
-    max_gaussians: int = 12000       # no densification step starts at or above this count (one step
-                                     # may overshoot it: 12k ended at 12-15.6k in RESULTS.md)
+    max_gaussians: int = 12000       # densification grows the Gaussians up to this count, no more
+                                     # (the highest-gradient candidates first); 0 = no cap
+
+    def __post_init__(self) -> None:
+        if self.max_gaussians < 0:
+            raise ConfigError("config", "densify.max_gaussians", "an integer >= 0 (0: no cap)",
+                              repr(self.max_gaussians))
 
 
 @dataclass

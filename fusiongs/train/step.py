@@ -174,12 +174,15 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             in event-only mode).
         it: the iteration (for the EDI prior's schedule).
         coarse: render at ``1/coarse`` resolution against block-averaged frames (only without
-            events in this step: count maps do not average like log intensities).
+            events in this step: count maps do not average like log intensities), with
+            ``blur.coarse_n_samples`` renders per exposure when set.
 
     With ``blur.crop = (w, h)`` (and frames, at full resolution) every render of the step shows one
     random ``w`` × ``h`` crop; the blur and event losses are taken on it.
     """
     n = cfg.blur.n_samples
+    if coarse > 1 and cfg.blur.coarse_n_samples is not None:
+        n = cfg.blur.coarse_n_samples
     has_frames = data.n_frames > 0
     use_events = data.events is not None and (lam_ev > 0 or not has_frames)
     camera, targets = data.camera, data.targets

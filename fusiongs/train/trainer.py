@@ -65,7 +65,8 @@ class Trained:
 def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
     d = cfg.densify
     return DensifyConfig(grow_grad2d=d.grad_threshold, refine_start=d.start, refine_stop=d.stop,
-                         refine_every=d.every, reset_opacity_every=d.reset_opacity_every)
+                         refine_every=d.every, reset_opacity_every=d.reset_opacity_every,
+                         max_gaussians=d.max_gaussians)
 
 
 def _optimizers(state: FusionState, cfg: DeblurConfig, extent: float) -> dict[str, torch.optim.Optimizer]:
@@ -197,7 +198,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             history.backward_seconds += time.perf_counter() - t_back
             history.render_seconds += res.parts["render_s"]
             _optimise(opts, cfg, it)
-            if cfg.densify.enabled and state.model.n < cfg.densify.max_gaussians:
+            if cfg.densify.enabled:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
             _record(history, it, float(loss.detach()), res.parts, state)

@@ -135,6 +135,24 @@ def test_refine_clones_small_splits_large_and_prunes_transparent():
     _adam_step(m, opt)
 
 
+@pytest.mark.parametrize("cap, grown", [(8, [4, 5]), (6, []), (0, [0, 1, 2, 3, 4, 5])])
+def test_growth_stops_exactly_at_the_cap_with_the_largest_gradients_first(cap, grown):
+    m = _model(n=6, scale=0.001)
+    with torch.no_grad():
+        m.log_scales[5] = torch.log(torch.tensor(0.5))  # large: split (one more Gaussian, as a clone)
+    opt = make_optimizer(m)
+    g = torch.zeros(1, 6, 2)
+    g[0, :, 0] = torch.tensor([1.0, 2.0, 3.0, 4.0, 6.0, 5.0]) * 1e-3  # all above the threshold
+    meta = _meta_with_grad(m, g, torch.ones(1, 6, 2, dtype=torch.int32))
+    s = DensifyStrategy(DensifyConfig(refine_start=0, refine_every=10, max_gaussians=cap), seed=0)
+    report = s.step_post_backward(m, opt, meta, step=10)
+    assert report.n_cloned + report.n_split == len(grown)
+    assert report.n_split == int(5 in grown)
+    assert m.n == 6 + len(grown)
+    if cap:
+        assert m.n <= max(cap, 6)
+
+
 def test_opacity_reset_happens_over_several_steps_and_can_be_disabled():
     cfg = DensifyConfig(refine_start=100, refine_stop=10, reset_opacity_every=3, prune_opacity=0.005)
     for enabled in (True, False):

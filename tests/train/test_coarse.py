@@ -62,6 +62,15 @@ def test_coarse_step_renders_small_and_refuses_events(scene, generator):
         training_step(state, data, cfg, 0, 0.1, generator, coarse=2)
 
 
+def test_coarse_steps_use_their_own_number_of_exposure_samples(scene, generator):
+    cfg = resolve_config(None, BASE + ["blur.n_samples=7", "blur.coarse_n_samples=3"])
+    data = prepare_data(scene, torch.device("cpu"), True)
+    state = build_state(data, scene.poses.c2w, build_trajectory(scene, cfg, torch.device("cpu")),
+                        cfg, torch.device("cpu"))
+    assert training_step(state, data, cfg, 0, 0.0, generator, coarse=2).renders.shape[0] == 3
+    assert training_step(state, data, cfg, 0, 0.0, generator, coarse=1).renders.shape[0] == 7
+
+
 def test_coarse_schedule_ends_at_its_iteration_or_when_events_start(scene):
     data = prepare_data(scene, torch.device("cpu"), True)
     cfg = resolve_config(None, BASE + ["blur.coarse_until=5", "blur.coarse_factor=2"])
@@ -78,7 +87,8 @@ def test_training_with_a_coarse_warmup_runs(scene, tmp_path):
     assert all(math.isfinite(v) for v in tr.history.event[3:])
 
 
-@pytest.mark.parametrize("key", ["blur.coarse_factor=0", "blur.n_samples=0", "blur.crop=[8,40]"])
+@pytest.mark.parametrize("key", ["blur.coarse_factor=0", "blur.n_samples=0", "blur.crop=[8,40]",
+                                 "blur.coarse_n_samples=0"])
 def test_bad_blur_settings_are_refused(key):
     with pytest.raises(ConfigError, match=key.split("=")[0]):
         resolve_config(None, [key])

@@ -94,6 +94,7 @@ def test_eval_command_reads_run_and_truth(tiny_scene, tiny_run, capsys):
     (["events.nope=1"], "events.nope"),
     (["events.loss=huber"], "events.loss"),
     (["optim.iterations=many"], "optim.iterations"),
+    (["densify.max_gaussians=-1"], "densify.max_gaussians"),
 ])
 def test_bad_config_is_one_line_and_exit_2(tiny_scene, tmp_path, capsys, bad, expected):
     assert main(["deblur", str(tiny_scene), "-o", str(tmp_path), *bad]) == 2
