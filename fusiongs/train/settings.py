@@ -16,13 +16,13 @@ class InitSettings:
     # stereo: plane sweep on the EDI frames (or the frames without events) plus random points;
     # auto: stereo with >= 2 frames, else random (event-only scenes, a single frame)
     method: Literal["auto", "random", "stereo"] = "auto"
-    n_points: int = 10000            # initial Gaussians (stereo points plus random ones in the frusta)
+    n_points: int = 15000            # initial Gaussians (stereo points plus random ones in the frusta)
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
     depth_max: float = 12.0          # far bound of the sampled depths (scene units)
     depth_sampling: Literal["volume", "depth", "disparity"] = "depth"  # density of sampled depths
-    opacity: float = 0.3             # initial opacity
+    opacity: float = 0.2             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)
-    stereo_share: float = 0.9        # at most this share of n_points from stereo (the rest random)
+    stereo_share: float = 0.85       # at most this share of n_points from stereo (the rest random)
     stereo_planes: int = 48          # depth hypotheses of the plane sweep (uniform in 1/z)
     stereo_min_confidence: float = 0.3  # drop pixels whose cost curve is flatter than this
 
@@ -44,7 +44,7 @@ class BlurSettings:
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
     coarse_until: int = 1000         # before this iteration, and only while λ_ev = 0, render at
     coarse_factor: int = 2           # 1/coarse_factor resolution against area-downsampled frames
-    coarse_n_samples: int | None = None  # N of the coarse steps (None: n_samples); blur trails are
+    coarse_n_samples: int | None = 5  # N of the coarse steps (None: n_samples); blur trails are
                                      # coarse_factor times shorter in coarse pixels
     crop: tuple[int, int] | None = None  # (w, h): render a random crop per step; None = whole frame
 
@@ -110,7 +110,7 @@ class EventOnlySettings:
 
 @dataclass
 class OptimSettings:
-    iterations: int = 1300
+    iterations: int = 1500
     lr_means: float = 1.6e-4         # times the scene extent
     lr_means_final: float = 1.6e-6   # exponential decay to this (times the scene extent)
     lr_scales: float = 5e-3
@@ -128,11 +128,11 @@ class OptimSettings:
 class DensifySettings:
     enabled: bool = True
     start: int = 300
-    stop: int = 1100
+    stop: int = 1300
     every: int = 100
     grad_threshold: float = 2e-4     # view-space gradient threshold (divided over the N renders)
     reset_opacity_every: int = 3000  # 0 disables; also disabled once events are on
-    max_gaussians: int = 12000       # densification grows the Gaussians up to this count, no more
+    max_gaussians: int = 18000       # densification grows the Gaussians up to this count, no more
                                      # (the highest-gradient candidates first); 0 = no cap
 
     def __post_init__(self) -> None:
