@@ -132,6 +132,17 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, col, height, width,
                 last[c, y, x] = k
 
 
+@njit(cache=True, inline="always")
+def store_geometry_grads(gbuf, e, g_mx, g_my, g_a, g_b, g_c, g_o):  # pragma: no cover - numba
+    """Write one (entry, row) slot's mean, conic and opacity gradients (columns 0-5 of gbuf)."""
+    gbuf[e, 0] = g_mx
+    gbuf[e, 1] = g_my
+    gbuf[e, 2] = g_a
+    gbuf[e, 3] = g_b
+    gbuf[e, 4] = g_c
+    gbuf[e, 5] = g_o
+
+
 @njit(cache=True, parallel=True)
 def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, col, height, width,
              tfin, last, v_img, v_alpha, gbuf):  # pragma: no cover - numba
@@ -198,12 +209,7 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, col, h
                     g_c += 0.5 * dy * dy * vs
                     g_mx += (a * dx + b * dy) * vs
                     g_my += (b * dx + cz * dy) * vs
-            gbuf[e, 0] = g_mx
-            gbuf[e, 1] = g_my
-            gbuf[e, 2] = g_a
-            gbuf[e, 3] = g_b
-            gbuf[e, 4] = g_c
-            gbuf[e, 5] = g_o
+            store_geometry_grads(gbuf, e, g_mx, g_my, g_a, g_b, g_c, g_o)
             for d in range(D):
                 gbuf[e, 6 + d] = gcol[d]
                 gcol[d] = 0.0

@@ -28,7 +28,7 @@ from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic
 
-from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, row_range_lim
+from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, row_range_lim, store_geometry_grads
 
 F = np.float32
 U = np.uint64
@@ -73,6 +73,17 @@ def alpha_limits(op: np.ndarray) -> np.ndarray:
     return 2.0 * np.log(o / ALPHA_T) * (1.0 + 1e-6) + 1e-6
 
 
+@njit(cache=True, inline="always", fastmath={"contract"})
+def _lane_gauss(mxg, x, ha, bdy, cyy):  # pragma: no cover - numba
+    """``(dx, sigma, exp(-sigma))`` of pixel x of a row: ``sigma = ha dx² + bdy dx + cyy``, the
+    exponential taken of sigma clamped to ``[0, SIGMA_MAX]`` (callers mask ``sigma < 0``)."""
+    dx = mxg - F(x)
+    sigma = (ha * dx + bdy) * dx + cyy
+    sc = sigma if sigma > F(0.0) else F(0.0)
+    sc = sc if sc < SIGMA_MAX else SIGMA_MAX
+    return dx, sigma, exp_neg_f32(sc)
+
+
 @njit(cache=True, parallel=True, fastmath={"contract"}, error_model="numpy")
 def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, width,
             img, tfin, last):  # pragma: no cover - numba
@@ -109,11 +120,8 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
             for blk in range(U(x0), U(x1 + 1), U(LANES)):
                 for lane in range(U(LANES)):
                     x = blk + lane
-                    dx = mxg - F(x)
-                    sigma = (ha * dx + bdy) * dx + cyy
-                    sc = sigma if sigma > F(0.0) else F(0.0)
-                    sc = sc if sc < SIGMA_MAX else SIGMA_MAX
-                    alpha = o * exp_neg_f32(sc)
+                    _, sigma, gauss = _lane_gauss(mxg, x, ha, bdy, cyy)
+                    alpha = o * gauss
                     alpha = alpha if alpha < F(MAX_A) else F(MAX_A)
                     t = trow[x]
                     nt = t * (F(1.0) - alpha)
@@ -201,11 +209,7 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, c
             for blk in range(U(x0), U(x1 + 1), U(LANES)):
                 for lane in range(U(LANES)):
                     x = blk + lane
-                    dx = mxg - F(x)
-                    sigma = (ha * dx + bdy) * dx + cyy
-                    sc = sigma if sigma > F(0.0) else F(0.0)
-                    sc = sc if sc < SIGMA_MAX else SIGMA_MAX
-                    gauss = exp_neg_f32(sc)
+                    _, sigma, gauss = _lane_gauss(mxg, x, ha, bdy, cyy)
                     og = o * gauss
                     alpha = og if og < F(MAX_A) else F(MAX_A)
                     valid = (x <= xe) & (kk <= lrow[x]) & (sigma >= F(0.0)) & (alpha >= F(ALPHA_T))
@@ -248,10 +252,5 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, c
                     g_c += F(0.5) * dy * dy * vs
                     g_mx += (a * dx + b * dy) * vs
                     g_my += (b * dx + cz * dy) * vs
-            gbuf[e, 0] = g_mx
-            gbuf[e, 1] = g_my
-            gbuf[e, 2] = g_a
-            gbuf[e, 3] = g_b
-            gbuf[e, 4] = g_c
-            gbuf[e, 5] = g_o
+            store_geometry_grads(gbuf, e, g_mx, g_my, g_a, g_b, g_c, g_o)
 
