@@ -83,7 +83,7 @@ class ThresholdSettings:
     init: float = 0.22               # initial θ for both polarities (when not estimated)
     estimate: bool = True            # start from the EDI consecutive-frame estimate (needs >= 2 frames)
     learn: bool = True               # learn θ after the warm-up
-    lr: float = 0.001                # Adam learning rate of log θ (1e-2 drifts low: see RESULTS.md)
+    lr: float = 1e-4                 # Adam lr of log θ; larger rates drift below the truth (RESULTS.md)
     regularise: float = 0.0          # weight of the pull toward the initial θ (event-only mode)
     grid: tuple[int, int] | None = None  # (gh, gw) spatial θ field over the sensor; None = scalar
     time_knots: int = 0              # knots of a slow θ drift over the recording (0 = none, else >= 2)
