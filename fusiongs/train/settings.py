@@ -5,10 +5,21 @@ Field comments are the documentation of every key; defaults follow ../shared/MET
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
 
 from fusiongs.errors import ConfigError
+
+
+def _need_positive(section: str, obj: object, names: tuple[str, ...], zero_ok: bool = False) -> None:
+    """ConfigError naming ``section.name`` for the first of ``names`` that is not a finite number
+    > 0 (>= 0 with ``zero_ok``)."""
+    for name in names:
+        v = getattr(obj, name)
+        if not (math.isfinite(v) and (v >= 0 if zero_ok else v > 0)):
+            raise ConfigError("config", f"{section}.{name}",
+                              "a finite number >= 0" if zero_ok else "a finite number > 0", repr(v))
 
 
 @dataclass
@@ -89,6 +100,10 @@ class ThresholdSettings:
     time_knots: int = 0              # knots of a slow θ drift over the recording (0 = none, else >= 2)
     smoothness: float = 1.0          # weight of the field / drift smoothness regulariser
 
+    def __post_init__(self) -> None:
+        _need_positive("threshold", self, ("init", "lr"))  # to freeze θ: threshold.learn=false
+        _need_positive("threshold", self, ("regularise", "smoothness"), zero_ok=True)
+
 
 @dataclass
 class PriorSettings:
@@ -122,6 +137,11 @@ class OptimSettings:
     lr_pose: float = 1e-3            # camera learning rate, decayed to lr_pose_final
     lr_pose_final: float = 1e-5
     pose_start: int = 500            # iteration from which poses are refined
+
+    def __post_init__(self) -> None:
+        _need_positive("optim", self, ("lr_means", "lr_means_final", "lr_scales", "lr_quats",
+                                       "lr_opacities", "lr_colors", "lr_gain", "lr_pose",
+                                       "lr_pose_final"))
 
 
 @dataclass

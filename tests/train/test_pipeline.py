@@ -95,6 +95,11 @@ def test_eval_command_reads_run_and_truth(tiny_scene, tiny_run, capsys):
     (["events.loss=huber"], "events.loss"),
     (["optim.iterations=many"], "optim.iterations"),
     (["densify.max_gaussians=-1"], "densify.max_gaussians"),
+    (["threshold.lr=-1"], "threshold.lr"),
+    (["threshold.lr=0"], "threshold.lr"),
+    (["threshold.init=0"], "threshold.init"),
+    (["threshold.regularise=-0.5"], "threshold.regularise"),
+    (["optim.lr_pose=-1e-3"], "optim.lr_pose"),
 ])
 def test_bad_config_is_one_line_and_exit_2(tiny_scene, tmp_path, capsys, bad, expected):
     assert main(["deblur", str(tiny_scene), "-o", str(tmp_path), *bad]) == 2
