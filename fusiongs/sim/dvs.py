@@ -11,6 +11,25 @@ closely (the stored level still advances, so the change is lost as in a real pix
 activity adds Poisson noise events. Grey sensors see ``I = w . L`` (Rec.601 weights), colour
 sensors one Bayer channel per pixel.
 
+Two further non-idealities, both off by default:
+
+- *Leak events* (junction leakage in the reset switch; model as in v2e, Hu, Liu & Delbruck,
+  "v2e: From Video Frames to Realistic DVS Events", CVPR Workshops 2021): the stored reference level
+  drifts down at ``r(u) * theta_on(u)`` log units per second, so a pixel looking at a static
+  scene fires ON events at ``r(u)`` Hz. ``r(u)`` is log-normal over pixels with mean
+  ``leak_rate_hz`` and a spread of ``leak_spread_decades`` decades (v2e's per-pixel rate mismatch;
+  its per-step jitter is left out), and every pixel starts with its reference a uniform fraction
+  of ``theta_on`` below the signal so that leak events are not synchronised. The drift is exact
+  inside the event model (:func:`dvs_events` ``drift`` and ``ref0``): leak events interact with
+  signal events and the refractory period as in a real pixel, with interpolated timestamps.
+- *Hot pixels*: a fixed random set of ``round(hot_pixel_fraction * P)`` pixels fires Poisson
+  events at ``hot_pixel_rate_hz`` each, whatever the scene does; the polarity is fixed per hot
+  pixel (drawn ON or OFF with equal odds once), as a stuck pixel of a real sensor.
+
+Background-activity and hot-pixel events are added after the pixel model and ignore its refractory
+period (a Poisson hot pixel at 200 Hz would lose ~20 % of its events to a 1 ms dead time; this
+model keeps them, so its hot-pixel rate is the rate seen in the stream).
+
 Vectorised over pixels; the only Python loop is over time steps.
 """
 
@@ -33,13 +52,20 @@ class DVSParams:
     Attributes:
         theta_on, theta_off: nominal ON / OFF contrast thresholds (log units).
         theta_sigma: standard deviation of the per-pixel threshold mismatch (log units).
-        theta_min: smallest threshold a pixel may get after mismatch.
+        theta_min: smallest threshold a pixel may get after mismatch (the per-pixel draw is
+            clamped there). With a nominal threshold of 0.1 and a spread of 0.05 about 16 % of the
+            pixels sit at the clamp and the mean per-pixel threshold is ~0.004 above the nominal
+            one; the simulator records the actual per-pixel means next to the nominal values.
         refractory_s: refractory period in seconds.
         ba_rate_hz: background-activity noise rate per pixel (Hz), half ON half OFF.
         eps: offset inside ``log(I + eps)`` (radiance units; scenes have radiance range ~1).
         theta_gradient: smooth spatial variation of the nominal thresholds: a factor
             ``1 + g (2 x / (W - 1) - 1)`` from the left to the right edge (0 = none); models a
             sensor whose thresholds vary across pixels (a learned threshold field can follow it).
+        hot_pixel_fraction: fraction of pixels that are hot (0 = none).
+        hot_pixel_rate_hz: event rate of each hot pixel (Hz), polarity fixed per pixel.
+        leak_rate_hz: nominal leak (ON) event rate per pixel on a static scene (Hz, 0 = none).
+        leak_spread_decades: standard deviation of the per-pixel leak rate in decades (log10).
     """
 
     theta_on: float = 0.25
@@ -50,6 +76,10 @@ class DVSParams:
     ba_rate_hz: float = 0.1
     eps: float = 1e-3
     theta_gradient: float = 0.0
+    hot_pixel_fraction: float = 0.0
+    hot_pixel_rate_hz: float = 200.0
+    leak_rate_hz: float = 0.0
+    leak_spread_decades: float = 0.1
 
 
 def sensor_log(rgb: torch.Tensor, cfa: str | None, eps: float) -> np.ndarray:
@@ -104,7 +134,8 @@ def count_events(logs: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray) 
 
 
 def dvs_events(logs: np.ndarray, times: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray,
-               refractory_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               refractory_s: float, drift: np.ndarray | None = None,
+               ref0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Events of all pixels from log intensities sampled at ``times``.
 
     Args:
@@ -112,18 +143,24 @@ def dvs_events(logs: np.ndarray, times: np.ndarray, theta_on: np.ndarray, theta_
         times: ``[K + 1]`` float64 increasing instants (s).
         theta_on, theta_off: ``[P]`` float64 per-pixel thresholds (log units).
         refractory_s: refractory period (s); 0 disables it.
+        drift: optional ``[P]`` leak: the stored reference level falls by ``drift`` log units per
+            second (see :func:`leak_drift`); equivalently the signal gains ``drift * t``.
+        ref0: optional ``[P]`` initial reference levels (default ``logs[0]``).
 
     Returns:
         ``t [E]`` int64 µs (sorted), ``pixel [E]`` int64 flat index, ``p [E]`` int8 +-1. Each pixel's
-        reference level starts at ``logs[0]``; without refractory losses the signed sum of
-        thresholds of a pixel's events stays within one threshold of its log change.
+        reference level starts at ``ref0``; without refractory losses the signed sum of
+        thresholds of a pixel's events stays within one threshold of its log change (plus
+        ``drift * duration`` and ``logs[0] - ref0``).
     """
     n_pix = logs.shape[1]
-    ref = logs[0].astype(np.float64)
+    ref = (logs[0] if ref0 is None else ref0).astype(np.float64)
     t_last = np.full(n_pix, -np.inf)
     out_t, out_i, out_p = [], [], []
     for k in range(logs.shape[0] - 1):
         a, b = logs[k].astype(np.float64), logs[k + 1].astype(np.float64)
+        if drift is not None:  # leak: a falling reference is a rising signal
+            a, b = a + drift * (times[k] - times[0]), b + drift * (times[k + 1] - times[0])
         t0, dt = float(times[k]), float(times[k + 1] - times[k])
         d = b - ref
         n_on = np.floor(np.maximum(d, 0) / theta_on).astype(np.int64)
@@ -179,6 +216,48 @@ def background_activity(rate_hz: float, n_pixels: int, t0_s: float, t1_s: float,
     pix = rng.integers(0, n_pixels, size=n)
     p = np.where(rng.random(n) < 0.5, 1, -1).astype(np.int8)
     return t.astype(np.int64), pix.astype(np.int64), p
+
+
+def hot_pixel_events(fraction: float, rate_hz: float, n_pixels: int, t0_s: float, t1_s: float,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Hot pixels: ``round(fraction * n_pixels)`` distinct random pixels, each firing Poisson events
+    at ``rate_hz`` with one polarity per pixel (ON or OFF with equal odds).
+
+    Returns:
+        ``t [E]`` int64 µs (sorted), ``pixel [E]`` int64, ``p [E]`` int8.
+    """
+    n_hot = hot_pixel_count(fraction, n_pixels)
+    if n_hot == 0 or rate_hz <= 0 or t1_s <= t0_s:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int8)
+    hot = rng.choice(n_pixels, size=n_hot, replace=False).astype(np.int64)
+    pol = np.where(rng.random(n_hot) < 0.5, 1, -1).astype(np.int8)
+    counts = rng.poisson(rate_hz * (t1_s - t0_s), size=n_hot)
+    t = rng.integers(int(round(t0_s * 1e6)), int(round(t1_s * 1e6)) + 1, size=int(counts.sum()))
+    pix, p = np.repeat(hot, counts), np.repeat(pol, counts)
+    order = np.argsort(t, kind="stable")
+    return t[order].astype(np.int64), pix[order], p[order]
+
+
+def hot_pixel_count(fraction: float, n_pixels: int) -> int:
+    """Number of hot pixels of a sensor: ``round(fraction * n_pixels)`` (fraction clipped to [0, 1])."""
+    return int(round(min(max(fraction, 0.0), 1.0) * n_pixels))
+
+
+def leak_drift(params: DVSParams, theta_on: np.ndarray,
+               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Leak inputs of :func:`dvs_events` for per-pixel ON thresholds ``theta_on [P]``.
+
+    Returns:
+        ``drift [P]`` float64 log units per second (``rate(u) * theta_on(u)``, ``rate(u)`` the
+        pixel's leak rate, log-normal with mean ``params.leak_rate_hz``) and ``phase [P]`` in [0, 1):
+        start each reference ``phase * theta_on`` below the signal (``ref0 = logs[0] - phase *
+        theta_on``) so that leak events of a static scene are spread over the first period.
+    """
+    n = theta_on.shape[0]
+    z, phase = rng.standard_normal(n), rng.random(n)
+    sd = params.leak_spread_decades * np.log(10.0)  # log-normal with mean leak_rate_hz
+    rate = params.leak_rate_hz * np.exp(sd * z - sd**2 / 2)
+    return rate * theta_on, phase
 
 
 def merge_sorted(*streams: tuple[np.ndarray, np.ndarray, np.ndarray]):

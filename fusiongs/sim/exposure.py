@@ -1,4 +1,5 @@
-"""Blurry frame formation: exposure-time integration in linear light, sensor noise, 8-bit sRGB.
+"""Blurry frame formation: exposure-time integration in linear light, sensor noise, 8-bit sRGB
+(or linear 16-bit) encoding.
 
 A blurry frame is the mean linear radiance over its exposure window (METHOD.md section 1), here
 with many sub-samples (midpoint rule), then photon shot noise and read noise in linear light, the
@@ -59,3 +60,9 @@ def encode_srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear radiance -> sRGB -> 8-bit levels, returned as float32 ``level / 255`` in [0, 1]."""
     v = linear_to_srgb(np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0))
     return (np.rint(v * 255.0) / 255.0).astype(np.float32)
+
+
+def encode_linear16(linear: np.ndarray) -> np.ndarray:
+    """Linear radiance clipped to [0, 1] -> 16-bit levels, returned as float32 ``level / 65535``."""
+    v = np.clip(np.asarray(linear, dtype=np.float64), 0.0, 1.0)
+    return (np.rint(v * 65535.0) / 65535.0).astype(np.float32)

@@ -8,7 +8,7 @@ frame. Poses are camera-to-world, OpenCV axes (x right, y down, z forward).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -33,8 +33,9 @@ class Motion:
         shake_pos: hand-shake translation amplitude (m, per axis, sum of the sinusoids).
         shake_rot_deg: hand-shake rotation amplitude (degrees, per axis).
         shake_hz: frequency range of the shake sinusoids.
-    period: seconds the path from start to end values takes (speed does not depend on the
-        recording's duration; longer recordings continue along the same arc).
+        period: seconds the path from start to end values takes (speed does not depend on the
+            recording's duration; longer recordings continue along the same arc).
+        start: path position at ``t = 0`` in units of the path (0 = start values, 1 = end values).
     """
 
     target: tuple[float, float, float] = (0.0, 0.0, 4.0)
@@ -48,6 +49,23 @@ class Motion:
     shake_rot_deg: float = 0.3
     shake_hz: tuple[float, float] = (2.0, 14.0)
     period: float = 1.0
+    start: float = 0.0
+
+
+def scale_motion(motion: Motion, factor: float, duration: float) -> Motion:
+    """The same path travelled ``factor`` times as fast, centred on the middle of the recording,
+    with the hand shake ``factor`` times as strong: every image velocity (and so the blur of a
+    fixed exposure) scales by ``factor``.
+
+    Args:
+        motion: the preset's motion. factor: speed factor (> 0; 1 returns ``motion`` unchanged).
+        duration: recording length (s); the path position at ``duration / 2`` does not change.
+    """
+    if factor == 1.0:
+        return motion
+    start = motion.start + (1.0 - factor) * duration / (2.0 * motion.period)
+    return replace(motion, period=motion.period / factor, start=start,
+                   shake_pos=motion.shake_pos * factor, shake_rot_deg=motion.shake_rot_deg * factor)
 
 
 @dataclass(frozen=True)
@@ -66,7 +84,7 @@ class Trajectory:
     def c2w(self, t: np.ndarray) -> np.ndarray:
         """Camera-to-world poses ``[M, 4, 4]`` float64 at times ``t [M]`` (s)."""
         m, t = self.motion, np.atleast_1d(np.asarray(t, dtype=np.float64))
-        s = t / m.period
+        s = t / m.period + m.start
         az = np.radians(m.azimuth_deg[0] + (m.azimuth_deg[1] - m.azimuth_deg[0]) * s)
         r = m.radius[0] + (m.radius[1] - m.radius[0]) * s
         h = m.height[0] + (m.height[1] - m.height[0]) * s - m.bob * np.sin(np.pi * s)

@@ -1,9 +1,10 @@
 """Simulate a complete scene: blurry frames, events, trajectory and sharp truth from a preset.
 
 Pipeline: preset world + seeded trajectory -> dense linear renders (ray caster) at ``dvs_rate_hz``
--> DVS events; renders at ``blur_samples`` instants per exposure -> mean -> noise -> 8-bit sRGB
-frames; sharp renders at every frame's mid-exposure (``deblur_<stem>``) and at held-out instants
-between exposures (``novel_<k>``) -> truth. Same config and seed -> identical output.
+-> DVS events (+ leak, background activity, hot pixels); renders at ``blur_samples`` instants per
+exposure -> mean -> noise -> 8-bit sRGB frames (or linear 16-bit ones); sharp renders at every
+frame's mid-exposure (``deblur_<stem>``) and at held-out instants between exposures
+(``novel_<k>``) -> truth. Same config and seed -> identical output.
 """
 
 from __future__ import annotations
@@ -21,9 +22,9 @@ from fusiongs.events.stream import EventStream
 from fusiongs.frames.frameset import FrameSet
 from fusiongs.io.scene import RenderRequest, Scene
 from fusiongs.sim import dvs
-from fusiongs.sim.exposure import add_sensor_noise, blur_frame, encode_srgb8
-from fusiongs.sim.motion import make_trajectory
-from fusiongs.sim.presets import get_preset
+from fusiongs.sim.exposure import add_sensor_noise, blur_frame, encode_linear16, encode_srgb8
+from fusiongs.sim.motion import Trajectory, make_trajectory, scale_motion
+from fusiongs.sim.presets import Preset, get_preset
 from fusiongs.sim.raycast import RayCaster, fov_focal
 
 
@@ -49,6 +50,10 @@ class SimConfig:
         read_noise, shot_gain: frame noise (linear units, variance per unit radiance).
         pose_rate_hz: sampling rate of ``trajectory.txt``.
         device: torch device of the ray caster.
+        frame_response: how frames are stored: ``"srgb"`` (8-bit sRGB) or ``"linear"`` (linear
+            radiance clipped to [0, 1], 16-bit PNG; ``scene.json`` says ``frame_response: linear``).
+        motion_scale: speed factor of the preset's camera path and hand shake, centred on the
+            middle of the recording (image velocities and blur scale with it).
     """
 
     preset: str = "boxes"
@@ -69,6 +74,8 @@ class SimConfig:
     shot_gain: float = 2e-4
     pose_rate_hz: float = 1000.0
     device: str = "cpu"
+    frame_response: str = "srgb"
+    motion_scale: float = 1.0
 
     def validate(self) -> SimConfig:
         """Return ``self`` or raise :class:`InputError` naming the bad field."""
@@ -85,9 +92,28 @@ class SimConfig:
         need(self.dvs_rate_hz * self.duration >= 2, "dvs_rate_hz", "at least 2 render steps")
         need(self.blur_samples >= 1, "blur_samples", "at least 1")
         need(self.supersample >= 1, "supersample", "at least 1")
+        need(self.frame_response in FRAME_RESPONSES, "frame_response", " or ".join(FRAME_RESPONSES))
+        need(0 < self.motion_scale <= 10, "motion_scale", "a speed factor in (0, 10]")
         if self.cfa is not None:
             check_pattern(self.cfa, "simulate", "cfa")
+        d = self.dvs
+        for name, ok, expected in (
+                ("theta_on", d.theta_on > 0, "a positive threshold"),
+                ("theta_off", d.theta_off > 0, "a positive threshold"),
+                ("theta_sigma", d.theta_sigma >= 0, "a non-negative spread"),
+                ("theta_min", d.theta_min > 0, "a positive smallest threshold"),
+                ("refractory_s", d.refractory_s >= 0, "a non-negative period in s"),
+                ("ba_rate_hz", d.ba_rate_hz >= 0, "a non-negative rate"),
+                ("hot_pixel_fraction", 0 <= d.hot_pixel_fraction <= 1, "a fraction in [0, 1]"),
+                ("hot_pixel_rate_hz", d.hot_pixel_rate_hz >= 0, "a non-negative rate"),
+                ("leak_rate_hz", d.leak_rate_hz >= 0, "a non-negative rate"),
+                ("leak_spread_decades", d.leak_spread_decades >= 0, "a non-negative spread")):
+            if not ok:
+                raise InputError("simulate", f"dvs.{name}", expected, repr(getattr(d, name)))
         return self
+
+
+FRAME_RESPONSES = ("srgb", "linear")
 
 
 @dataclass(frozen=True, eq=False)
@@ -117,6 +143,32 @@ def novel_instants(cfg: SimConfig) -> np.ndarray:
     return (np.arange(cfg.novel) + 0.5) / cfg.novel * cfg.duration
 
 
+@dataclass(frozen=True, eq=False)
+class SceneRenderer:
+    """The camera, the seeded trajectory and the ray caster of a config: ``render(t)`` is the sharp
+    ``[H, W, 3]`` linear radiance at instant ``t`` (s)."""
+
+    camera: PinholeCamera
+    trajectory: Trajectory
+    caster: RayCaster
+
+    def render(self, t: float) -> torch.Tensor:
+        return self.caster.render(self.trajectory.c2w(np.array([t]))[0])
+
+
+def scene_renderer(cfg: SimConfig, preset: Preset | None = None) -> SceneRenderer:
+    """The renderer :func:`run_simulation` uses for ``cfg`` (same seeds, so the same images)."""
+    preset = preset if preset is not None else get_preset(cfg.preset)
+    seeds = np.random.SeedSequence(cfg.seed).spawn(5)
+    rng_shake, rng_jitter = np.random.default_rng(seeds[0]), np.random.default_rng(seeds[4])
+    f = fov_focal(cfg.width, preset.hfov_deg)
+    camera = PinholeCamera(cfg.width, cfg.height, f, f, cfg.width / 2, cfg.height / 2)
+    traj = make_trajectory(scale_motion(preset.motion, cfg.motion_scale, cfg.duration), cfg.duration,
+                           rng_shake)
+    caster = RayCaster(preset.world, camera, cfg.supersample, int(rng_jitter.integers(2**31)), cfg.device)
+    return SceneRenderer(camera, traj, caster)
+
+
 def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     """Simulate a scene.
 
@@ -125,19 +177,21 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
         preset: optional ``fusiongs.sim.presets.Preset`` overriding ``cfg.preset`` (custom worlds).
 
     Returns:
-        a :class:`SimResult`; ``stats`` holds the event count, the thresholds used, timings and
-        the mean blur extent in pixels.
+        a :class:`SimResult`; ``stats`` holds the event counts, the sensor's true parameters
+        (``theta_on`` / ``theta_off``: nominal thresholds after any ``events_target`` scaling;
+        ``theta_*_pixel_mean``: means of the per-pixel draws; refractory, noise, hot pixels, leak),
+        the scene choices (preset, CFA, frame response, exposure, motion scale), timings, the mean
+        blur extent in pixels and the whole config.
     """
     cfg.validate()
     t_begin = time.perf_counter()
-    preset = preset if preset is not None else get_preset(cfg.preset)
-    seeds = np.random.SeedSequence(cfg.seed).spawn(5)
-    rng_shake, rng_theta, rng_ba, rng_noise, rng_jitter = (np.random.default_rng(s) for s in seeds)
-    f = fov_focal(cfg.width, preset.hfov_deg)
-    camera = PinholeCamera(cfg.width, cfg.height, f, f, cfg.width / 2, cfg.height / 2)
-    traj = make_trajectory(preset.motion, cfg.duration, rng_shake)
-    caster = RayCaster(preset.world, camera, cfg.supersample, int(rng_jitter.integers(2**31)), cfg.device)
-    render = lambda t: caster.render(traj.c2w(np.array([t]))[0])
+    scene_r = scene_renderer(cfg, preset)
+    camera, traj, caster, render = scene_r.camera, scene_r.trajectory, scene_r.caster, scene_r.render
+    # Children 0 and 4 drive shake and jitter (scene_renderer); 5 and 6 were added for hot pixels
+    # and leak, so the first five streams, and with them every default scene, are unchanged.
+    seeds = np.random.SeedSequence(cfg.seed).spawn(7)
+    rng_theta, rng_ba, rng_noise, rng_hot, rng_leak = (np.random.default_rng(seeds[i])
+                                                        for i in (1, 2, 3, 5, 6))
 
     # Events: dense renders -> sensor log intensity -> DVS model.
     n_steps = int(round(cfg.duration * cfg.dvs_rate_hz))
@@ -150,17 +204,27 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     scale = 1.0
     if cfg.events_target is not None:
         scale = tune_threshold_scale(logs, th_on, th_off, cfg.events_target)
-    ev = dvs.dvs_events(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s)
+    drift = phase = None
+    if cfg.dvs.leak_rate_hz > 0:
+        drift, phase = dvs.leak_drift(cfg.dvs, th_on, rng_leak)
+
+    def events_at(s: float):
+        return _pixel_events(logs, times, th_on * s, th_off * s, cfg.dvs.refractory_s, drift, phase, s)
+
+    ev = events_at(scale)
     for _ in range(2 if cfg.events_target is not None else 0):
         # The fast count ignores refractory losses: correct with the real count (~ 1 / scale).
         n = ev[0].size
         if n == 0 or abs(n - cfg.events_target) <= 0.02 * cfg.events_target:
             break
         scale = float(np.clip(scale * n / cfg.events_target, 0.05, 20.0))
-        ev = dvs.dvs_events(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s)
+        ev = events_at(scale)
     noise = dvs.background_activity(cfg.dvs.ba_rate_hz, logs.shape[1], 0.0, cfg.duration, rng_ba)
-    t_us, pix, pol = dvs.merge_sorted(ev, noise)
-    del logs
+    hot = dvs.hot_pixel_events(cfg.dvs.hot_pixel_fraction, cfg.dvs.hot_pixel_rate_hz, logs.shape[1],
+                               0.0, cfg.duration, rng_hot)
+    t_us, pix, pol = dvs.merge_sorted(ev, noise, hot)
+    n_pixels = logs.shape[1]
+    logs = None  # free the dense log intensities before the frames
     events = EventStream.create(t_us, pix % cfg.width, pix // cfg.width, pol, cfg.width, cfg.height,
                                 cfg.cfa, source="simulator")
     t_frames = time.perf_counter()
@@ -169,9 +233,10 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     t_start, t_end = frame_windows(cfg)
     imgs, gt, renders = [], {}, []
     names = tuple(f"{i:06d}" for i in range(cfg.frames))
+    encode = encode_linear16 if cfg.frame_response == "linear" else encode_srgb8
     for i in range(cfg.frames):
         mean = blur_frame(render, float(t_start[i]), float(t_end[i]), cfg.blur_samples).cpu().numpy()
-        imgs.append(encode_srgb8(add_sensor_noise(mean, cfg.read_noise, cfg.shot_gain, rng_noise)))
+        imgs.append(encode(add_sensor_noise(mean, cfg.read_noise, cfg.shot_gain, rng_noise)))
         t_mid = float((t_start[i] + t_end[i]) / 2)
         renders.append(RenderRequest(f"deblur_{names[i]}", t_mid))
     for k, t in enumerate(novel_instants(cfg)):
@@ -179,7 +244,8 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     for r in renders:
         gt[r.name] = encode_srgb8(render(r.t).cpu().numpy())
     images = np.stack(imgs) if imgs else np.zeros((0, cfg.height, cfg.width, 3), np.float32)
-    frames = FrameSet(images, t_start.astype(np.float64), t_end.astype(np.float64), names, "srgb")
+    frames = FrameSet(images, t_start.astype(np.float64), t_end.astype(np.float64), names,
+                      cfg.frame_response)
     scene = Scene(camera, events, frames, traj.samples(cfg.pose_rate_hz), tuple(renders), None)
     t_done = time.perf_counter()
     stats = {
@@ -187,12 +253,30 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
         "on_fraction": events.polarity_balance,
         "theta_on": cfg.dvs.theta_on * scale, "theta_off": cfg.dvs.theta_off * scale,
         "theta_sigma": cfg.dvs.theta_sigma * scale, "threshold_scale": scale,
+        "theta_on_pixel_mean": float(th_on.mean() * scale),
+        "theta_off_pixel_mean": float(th_off.mean() * scale),
+        "refractory_s": cfg.dvs.refractory_s, "ba_rate_hz": cfg.dvs.ba_rate_hz,
+        "hot_pixel_fraction": cfg.dvs.hot_pixel_fraction, "hot_pixel_rate_hz": cfg.dvs.hot_pixel_rate_hz,
+        "hot_pixels": dvs.hot_pixel_count(cfg.dvs.hot_pixel_fraction, n_pixels),
+        "events_hot": int(hot[0].size),
+        "events_background": int(noise[0].size), "leak_rate_hz": cfg.dvs.leak_rate_hz,
+        "preset": cfg.preset, "cfa": cfg.cfa, "frame_response": cfg.frame_response,
+        "exposure": cfg.exposure, "motion_scale": cfg.motion_scale,
         "blur_px": mean_blur_px(caster, traj, camera, t_start, t_end),
         "seconds_event_renders": t_events - t_begin, "seconds_dvs": t_frames - t_events,
         "seconds_frames_truth": t_done - t_frames, "seconds_total": t_done - t_begin,
         "config": {k: v for k, v in asdict(cfg).items()},
     }
     return SimResult(scene, gt, stats)
+
+
+def _pixel_events(logs, times, th_on, th_off, refractory_s, drift, phase, scale):
+    """:func:`dvs.dvs_events` with the leak (``drift``, ``phase`` of :func:`dvs.leak_drift`, or
+    ``None``) at thresholds scaled by ``scale``."""
+    if drift is None:
+        return dvs.dvs_events(logs, times, th_on, th_off, refractory_s)
+    return dvs.dvs_events(logs, times, th_on, th_off, refractory_s, drift=drift * scale,
+                          ref0=logs[0] - phase * th_on)
 
 
 def simulate_scene(cfg: SimConfig) -> tuple[Scene, dict[str, np.ndarray]]:

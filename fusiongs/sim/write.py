@@ -18,6 +18,9 @@ def write_simulated_scene(scene: Scene, gt: dict[str, np.ndarray], path: str | P
                           stats: dict | None = None, overwrite: bool = False) -> Path:
     """Write ``scene`` (FORMAT.md folder) and ``gt/<name>.png`` (8-bit sRGB) for every truth image.
 
+    Frames are written as 8-bit PNGs, or as 16-bit ones when their response is ``"linear"``
+    (8 bits of linear light would crush the shadows).
+
     Args:
         scene: the simulated scene (``simulate_scene``).
         gt: render name -> ``[H, W, 3]`` float32 sRGB truth in [0, 1].
@@ -41,7 +44,7 @@ def write_simulated_scene(scene: Scene, gt: dict[str, np.ndarray], path: str | P
     if missing:
         raise InputError("write_simulated_scene", "gt", "a truth image for every render",
                          f"missing {missing}")
-    jp = save_scene(scene, root)
+    jp = save_scene(scene, root, images_bits=16 if scene.frames.response == "linear" else 8)
     (root / "gt").mkdir(exist_ok=True)
     for name, img in gt.items():
         write_png(root / "gt" / f"{name}.png", img)

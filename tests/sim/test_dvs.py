@@ -10,13 +10,17 @@ import torch
 from fusiongs.sim import dvs
 
 
-def reference_dvs(logs, times, th_on, th_off, refractory):
-    """Slow, obviously-correct model: every pixel, every step, one crossing at a time."""
+def reference_dvs(logs, times, th_on, th_off, refractory, drift=None, ref0=None):
+    """Slow, obviously-correct model: every pixel, every step, one crossing at a time. A leak
+    ``drift`` lowers the reference by ``drift * (t - t0)``: the same as raising the signal."""
     events = []
     for i in range(logs.shape[1]):
-        ref, t_last = float(logs[0, i]), -math.inf
+        ref, t_last = float(logs[0, i] if ref0 is None else ref0[i]), -math.inf
         for k in range(logs.shape[0] - 1):
             a, b = float(logs[k, i]), float(logs[k + 1, i])
+            if drift is not None:
+                a += drift[i] * (times[k] - times[0])
+                b += drift[i] * (times[k + 1] - times[0])
             t0, dt = float(times[k]), float(times[k + 1] - times[k])
             while True:
                 if b - ref >= th_on[i]:
@@ -49,6 +53,19 @@ def test_vectorised_events_equal_the_per_pixel_reference(rng):
         fast = sorted(zip(t.tolist(), pix.tolist(), p.tolist()))
         assert fast == reference_dvs(logs, times, th_on, th_off, refractory)
         assert np.all(np.diff(t) >= 0)
+
+
+def test_leak_drift_and_initial_reference_equal_the_per_pixel_reference(rng):
+    logs = _random_logs(rng)
+    times = np.linspace(0.0, 0.04, logs.shape[0])
+    params = dvs.DVSParams(leak_rate_hz=200.0)  # fast leak: several leak events in 40 ms
+    th_on, th_off = dvs.pixel_thresholds(params, logs.shape[1], rng)
+    drift, phase = dvs.leak_drift(params, th_on, rng)
+    ref0 = logs[0] - phase * th_on
+    for refractory in (0.0, 300e-6):
+        t, pix, p = dvs.dvs_events(logs, times, th_on, th_off, refractory, drift=drift, ref0=ref0)
+        fast = sorted(zip(t.tolist(), pix.tolist(), p.tolist()))
+        assert fast == reference_dvs(logs, times, th_on, th_off, refractory, drift, ref0)
 
 
 def test_signed_threshold_sum_tracks_log_change_within_one_threshold(rng):

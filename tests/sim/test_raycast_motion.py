@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.camera.tum import read_tum, write_tum
-from fusiongs.sim.motion import Motion, make_trajectory, rotvec_to_matrix
+from fusiongs.sim.motion import Motion, make_trajectory, rotvec_to_matrix, scale_motion
 from fusiongs.sim.raycast import Quad, RayCaster, World, box_quads
 from fusiongs.sim.textures import solid_texture
 
@@ -71,3 +72,16 @@ def test_shake_depends_on_the_seed():
     b = make_trajectory(Motion(), 1.0, np.random.default_rng(2)).c2w(np.array([0.3]))
     c = make_trajectory(Motion(), 1.0, np.random.default_rng(1)).c2w(np.array([0.3]))
     assert not np.allclose(a, b) and np.array_equal(a, c)
+
+
+def test_scaled_motion_keeps_the_middle_pose_and_scales_the_velocity():
+    m = Motion(target=(0.0, 0.0, 5.0), radius=(5.0, 4.0), azimuth_deg=(-10.0, 12.0), shake_pos=0.0,
+               shake_rot_deg=0.0)
+    assert scale_motion(m, 1.0, 1.0) is m
+    base = make_trajectory(m, 1.0, np.random.default_rng(0))
+    fast = make_trajectory(scale_motion(m, 1.5, 1.0), 1.0, np.random.default_rng(0))
+    assert np.allclose(base.c2w(np.array([0.5])), fast.c2w(np.array([0.5])))
+    v = lambda tr: np.linalg.norm(np.diff(tr.c2w(np.array([0.5, 0.5001]))[:, :3, 3], axis=0))
+    assert v(fast) / v(base) == pytest.approx(1.5, rel=1e-3)
+    shaky = scale_motion(Motion(), 0.5, 1.0)
+    assert shaky.shake_pos == pytest.approx(0.002) and shaky.shake_rot_deg == pytest.approx(0.15)
