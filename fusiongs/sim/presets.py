@@ -9,6 +9,14 @@ along +z. Each preset differs in geometry, textures and motion:
   little rotation (nearly planar scene).
 - ``corridor``: a corridor (textured walls, floor, ceiling, an end wall) with a box; the camera
   dollies forward while turning slightly (looming motion, depth from 1 to 12 m).
+- ``gallery``: five photo panels at depths 2.5 to 7 m in front of a grass wall at 10 m, over a
+  gravel floor; every texture is cropped so that it has about 1.5 texels per pixel at the default
+  173-pixel width (fine, high-frequency detail everywhere); a sideways arc.
+- ``dark``: a dimly lit room (walls and floor at a few percent of the bright radiance, most pixels
+  below 0.03) with a few bright things: a lit poster, a bright box, a lamp, a star field; an arc.
+- ``depth``: thin posts and a box 1.2 to 2 m away, boxes at 8 and 14 m, a far wall at 40 m and a
+  floor between them; a sideways slide looking at the far wall (image speed falls with depth:
+  strong parallax).
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ import numpy as np
 from fusiongs.errors import InputError
 from fusiongs.sim.motion import Motion
 from fusiongs.sim.raycast import Quad, World, box_quads, lambert_gain
-from fusiongs.sim.textures import load_photo
+from fusiongs.sim.textures import load_photo, solid_texture
 
 LIGHT = (0.35, -0.8, -0.5)  # direction towards the light (from above, left, behind the camera)
 
@@ -109,7 +117,67 @@ def corridor() -> Preset:
     return Preset(World(tuple(quads), tex), motion, 66.0)
 
 
-PRESETS: dict[str, Callable[[], Preset]] = {"boxes": boxes, "wall": wall, "corridor": corridor}
+def gallery() -> Preset:
+    """Sideways arc past photo panels at several depths, every texture fine at the pixel scale."""
+    tex = (load_photo("grass", (0.75, 0.9, 0.6)), load_photo("gravel", (0.8, 0.75, 0.7)),
+           load_photo("hubble_deep_field"), load_photo("immunohistochemistry"),
+           load_photo("page", (0.95, 0.9, 0.8)), load_photo("coins", (0.9, 0.85, 0.7)),
+           load_photo("text", (0.8, 0.85, 0.95)))
+    quads = [  # crops: about 1.5 texels per pixel at 173 pixels across (coins: 3)
+        _plane((-12, -8, 10.0), (24, 0, 0), (0, 16, 0), 0, crop=(0.0, 0.0, 1.0, 0.68)),  # back wall
+        _plane((-6, 1.5, 0.5), (12, 0, 0), (0, 0, 9.5), 1),  # floor (y = 1.5)
+        _plane((-1.3, -0.9, 2.5), (1.4, 0, 0), (0, 1.0, 0), 2, crop=(0.30, 0.30, 0.54, 0.49)),
+        _plane((0.4, -0.2, 3.5), (1.6, 0, 0), (0, 1.2, 0), 3, crop=(0.05, 0.05, 0.24, 0.195)),
+        _plane((-2.8, 0.2, 5.0), (2.2, 0, 0), (0, 1.6, 0), 4, crop=(0.0, 0.30, 0.25, 0.66)),
+        _plane((0.5, -2.6, 7.0), (3.0, 0, 0), (0, 2.2, 0), 5, crop=(0.0, 0.0, 0.5, 0.5)),
+        _plane((-2.5, -1.7, 4.3), (1.4, 0, -0.5), (0, 1.1, 0), 6, crop=(0.30, 0.0, 0.47, 0.33)),
+    ]
+    motion = Motion(target=(0.0, 0.0, 12.0), radius=(12.0, 12.0), azimuth_deg=(-10.0, 10.0),
+                    height=(-0.2, 0.0), bob=0.05, shake_pos=0.004, shake_rot_deg=0.3)
+    return Preset(World(tuple(quads), tex), motion, 62.0)
+
+
+def dark() -> Preset:
+    """Arc through a dim room: large dark walls and floor, a few bright objects."""
+    tex = (load_photo("brick", (0.9, 0.7, 0.55)), load_photo("gravel"), load_photo("camera"),
+           load_photo("astronaut"), load_photo("coffee"), load_photo("hubble_deep_field"),
+           solid_texture((1.0, 0.9, 0.7)), load_photo("page", (0.9, 0.9, 0.8)))
+    dim = 0.05
+    quads = [
+        _plane((-10, -6, 8.0), (20, 0, 0), (0, 12, 0), 0, dim),  # back wall
+        _plane((-10, 1.4, 0.5), (20, 0, 0), (0, 0, 7.5), 1, 0.6 * dim),  # floor (y = 1.4)
+        _plane((-2.6, -1.6, 7.95), (1.8, 0, 0), (0, 1.4, 0), 2, dim),  # dim posters on the wall
+        _plane((1.6, 0.1, 7.95), (1.4, 0, 0), (0, 1.8, 0), 7, dim),
+        _plane((0.3, -1.4, 6.5), (1.2, 0, -0.3), (0, 1.2, 0), 3, 1.3),  # a lit poster
+        *_box((-1.0, 0.9, 4.5), (0.9, 1.0, 0.9), 4, 1.6),  # a bright box
+        _plane((1.6, -1.2, 5.0), (0.35, 0, 0), (0, 0.5, 0), 6, 2.5),  # a lamp
+        _plane((-3.6, -0.4, 6.0), (1.2, 0, 0.2), (0, 0.9, 0), 5, 1.0),  # a star field
+    ]
+    motion = Motion(target=(0.0, 0.3, 15.0), radius=(15.0, 15.0), azimuth_deg=(-10.0, 10.0),
+                    height=(-0.3, -0.2), bob=0.05, shake_pos=0.004, shake_rot_deg=0.3)
+    return Preset(World(tuple(quads), tex, background=(0.004, 0.004, 0.005)), motion, 62.0)
+
+
+def depth() -> Preset:
+    """Sideways slide past near posts toward a far wall: depths from 1.2 to 40 m."""
+    tex = (load_photo("rocket"), load_photo("grass", (0.7, 0.85, 0.55)), load_photo("brick", (0.8, 0.6, 0.5)),
+           load_photo("coffee"), load_photo("chelsea"), load_photo("astronaut"))
+    quads = [
+        _plane((-35, -30, 40.0), (70, 0, 0), (0, 31.2, 0), 0),  # far wall (z = 40)
+        _plane((-15, 1.2, 0.5), (30, 0, 0), (0, 0, 39.5), 1),  # floor (y = 1.2)
+        *_box((-0.75, 0.2, 1.3), (0.18, 2.0, 0.18), 2),  # a post 1.3 m away
+        *_box((0.85, 0.1, 2.0), (0.2, 2.2, 0.2), 2),  # another at 2 m
+        *_box((0.25, 0.95, 1.6), (0.4, 0.5, 0.4), 3),  # a small box on the floor
+        _plane((-3.5, -1.2, 8.0), (2.4, 0, 0), (0, 2.4, 0), 4),  # a panel at 8 m
+        _plane((2.0, -3.5, 14.0), (4.0, 0, 0), (0, 4.7, 0), 5),  # a panel at 14 m
+    ]
+    motion = Motion(target=(0.0, -0.3, 40.0), radius=(40.0, 40.0), azimuth_deg=(-1.6, 1.6),
+                    height=(-0.2, -0.2), bob=0.03, shake_pos=0.004, shake_rot_deg=0.3)
+    return Preset(World(tuple(quads), tex), motion, 62.0)
+
+
+PRESETS: dict[str, Callable[[], Preset]] = {"boxes": boxes, "wall": wall, "corridor": corridor,
+                                            "gallery": gallery, "dark": dark, "depth": depth}
 
 
 def get_preset(name: str) -> Preset:
