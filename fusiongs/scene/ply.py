@@ -9,6 +9,21 @@ unnormalised, normals zero. ``f_rest`` is channel-major: the ``K-1`` red coeffic
 then blue (Inria transposes ``[N, K-1, 3]`` to ``[N, 3, K-1]`` before flattening), so
 ``f_rest_{c (K-1) + j}`` is band coefficient ``j + 1`` of channel ``c``; ``f_dc_c`` is channel c.
 The active SH degree is not stored: a loaded model renders with all its bands.
+
+Colours are stored for display. fusiongs renders linear light (sRGB primaries) and shows it
+sRGB-encoded; 3DGS viewers (SuperSplat, the gsplat and nerfstudio viewers) show
+``SH_C0 * f_dc + 0.5`` (plus the ``f_rest`` terms) directly as the display colour. So with ``c =
+SH_C0 * sh0 + 0.5`` the linear base colour of a channel and ``S`` the sRGB encoding
+(:func:`fusiongs.frames.response.linear_to_srgb`, IEC 61966-2-1, its linear segment continued
+below 0 and its power law above 1, which keeps it invertible on every real)::
+
+    f_dc   = (S(c) - 0.5) / SH_C0          so  clip(SH_C0 f_dc + 0.5, 0, 1) = S(clip(c, 0, 1))
+    f_rest = S'(c) * shN                   (first order: the display change of view dependence)
+
+which is exactly what ``fusiongs deblur`` shows for the base colour. :func:`load_ply` inverts
+both (``sh0`` from ``S^-1``, ``shN`` divided by the same slope), so a write/read round trip
+returns the model up to float32 rounding; a PLY of another tool (trained on sRGB images) loads
+as the equivalent linear model.
 """
 
 from __future__ import annotations
@@ -21,7 +36,8 @@ import torch
 
 from fusiongs.atomic import atomic_path
 from fusiongs.errors import InputError
-from fusiongs.scene.gaussians import GaussianModel
+from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
+from fusiongs.scene.gaussians import SH_C0, GaussianModel
 
 _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
               "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
@@ -35,15 +51,49 @@ def _property_names(k: int) -> list[str]:
             + [f"scale_{i}" for i in range(3)] + [f"rot_{i}" for i in range(4)])
 
 
+def _srgb_and_slope(c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(S(c), S'(c))`` elementwise; the slope is kept >= 1e-6 (so dividing by it is safe)."""
+    with torch.enable_grad():
+        x = c.detach().clone().requires_grad_(True)
+        d = linear_to_srgb(x)
+        (slope,) = torch.autograd.grad(d.sum(), x)
+    return d.detach(), slope.clamp_min(1e-6)
+
+
+def display_sh(sh0: torch.Tensor, shN: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """PLY colour coefficients of a linear-light model (see the module docstring).
+
+    Args:
+        sh0: ``[N, 1, 3]`` DC coefficients (linear colour ``SH_C0 * sh0 + 0.5``).
+        shN: ``[N, K-1, 3]`` higher bands.
+
+    Returns:
+        ``(f_dc [N, 3], f_rest [N, K-1, 3])`` in float64: ``SH_C0 * f_dc + 0.5`` is the sRGB-encoded
+        colour, ``f_rest`` the bands scaled by the slope of the encoding at the base colour.
+    """
+    c = sh0[:, 0].detach().double() * SH_C0 + 0.5
+    d, slope = _srgb_and_slope(c)
+    return (d - 0.5) / SH_C0, shN.detach().double() * slope[:, None, :]
+
+
+def linear_sh(f_dc: torch.Tensor, f_rest: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Inverse of :func:`display_sh`: ``(sh0 [N, 1, 3], shN [N, K-1, 3])`` in float64."""
+    c = srgb_to_linear(f_dc.double() * SH_C0 + 0.5)
+    _, slope = _srgb_and_slope(c)
+    return ((c - 0.5) / SH_C0)[:, None, :], f_rest.double() / slope[:, None, :]
+
+
 def save_ply(model: GaussianModel, path: str | Path) -> None:
-    """Write ``model`` as an Inria-layout binary PLY, atomically (temporary file, then rename)."""
+    """Write ``model`` as an Inria-layout binary PLY, atomically (temporary file, then rename);
+    colours as display (sRGB-encoded) coefficients, see the module docstring."""
     path = Path(path)
     k = model.max_sh_degree + 1
     k = k * k
     n = model.n
     with torch.no_grad():
-        cols = [model.means, torch.zeros_like(model.means), model.sh0[:, 0],
-                model.shN.transpose(1, 2).reshape(n, -1), model.opacity_logits[:, None],
+        f_dc, f_rest = display_sh(model.sh0.cpu(), model.shN.cpu())
+        cols = [model.means, torch.zeros_like(model.means), f_dc,
+                f_rest.transpose(1, 2).reshape(n, -1), model.opacity_logits[:, None],
                 model.log_scales, model.quats]
         data = torch.cat([c.detach().float().cpu() for c in cols], 1).numpy()
     names = _property_names(k)
@@ -134,9 +184,9 @@ def load_ply(path: str | Path) -> GaussianModel:
             out[:, i] = rec[key]
         return torch.from_numpy(out)
 
-    shN = cols(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1).transpose(1, 2)
+    f_rest = cols(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1).transpose(1, 2)
+    sh0, shN = linear_sh(cols("f_dc_0", "f_dc_1", "f_dc_2"), f_rest)
     return GaussianModel(
         means=cols("x", "y", "z"), log_scales=cols("scale_0", "scale_1", "scale_2"),
         quats=cols("rot_0", "rot_1", "rot_2", "rot_3"), opacity_logits=cols("opacity")[:, 0],
-        sh0=cols("f_dc_0", "f_dc_1", "f_dc_2")[:, None, :], shN=shN.contiguous(),
-        active_sh_degree=degree)
+        sh0=sh0.float().contiguous(), shN=shN.float().contiguous(), active_sh_degree=degree)
