@@ -2,7 +2,8 @@
 
 Native layout: group ``events`` with 1-D datasets ``t`` (int64 µs), ``x``/``y`` (uint16) and ``p``
 (int8 ±1 or uint8 1/0), optional ``events.attrs["t_offset_us"]`` added to every ``t``. DSEC files
-(``events/{x,y,t,p}`` plus a root dataset ``t_offset`` and an index ``ms_to_idx``) read the same way.
+(``events/{x,y,t,p}`` plus a root dataset ``t_offset`` and an index ``ms_to_idx``) read the same way,
+also when compressed with Blosc/Zstd (their filters come from ``hdf5plugin``, imported on opening).
 """
 
 from __future__ import annotations
@@ -19,11 +20,22 @@ from fusiongs.events.stream import EventStream
 NATIVE_FIELDS = ("t", "x", "y", "p")
 
 
+def register_filters() -> None:
+    """Register the compression filters of ``hdf5plugin`` (Blosc, Zstd, LZ4, bitshuffle, ...) with
+    h5py, as DSEC files need; without the package only h5py's own filters are readable."""
+    try:
+        import hdf5plugin  # noqa: F401  (importing it registers the filters)
+    except ImportError:
+        pass  # read_dataset names a missing filter and the package to install
+
+
 @contextmanager
 def open_h5(path: str | Path):
-    """Open an HDF5 file read-only; a missing, truncated or non-HDF5 file is an :class:`InputError`."""
+    """Open an HDF5 file read-only, with the ``hdf5plugin`` filters registered (Blosc/Zstd
+    compressed DSEC files); a missing, truncated or non-HDF5 file is an :class:`InputError`."""
     import h5py
 
+    register_filters()
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file", "an existing HDF5 file", "no such file")
@@ -48,7 +60,7 @@ def read_dataset(f, key: str, path: str | Path) -> np.ndarray:
         return obj[...]
     except (OSError, ValueError, RuntimeError) as e:
         hint = " (compressed with a filter h5py lacks? try `pip install hdf5plugin`)" \
-            if "filter" in str(e).lower() else ""
+            if "filter" in str(e).lower() or "plugin" in str(e).lower() else ""
         raise InputError(path, key, "a readable dataset" + hint, str(e)) from None
 
 
