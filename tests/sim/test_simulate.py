@@ -138,9 +138,54 @@ def test_cli_writes_a_scene_and_exits_zero(tmp_path, capsys, only_simulate_verb)
     assert (out / "gt" / "deblur_000000.png").is_file() and (out / "gt" / "novel_000.png").is_file()
 
 
+_TINY_CLI = ["--size", "24x16", "--duration", "0.06", "--frames", "1", "--dvs-rate", "400",
+             "--blur-samples", "4", "--supersample", "1", "--novel", "1", "--threads", "1"]
+
+
+def test_cli_sensor_options_and_linear_frames_reach_the_scene(tmp_path, only_simulate_verb):
+    import cv2
+
+    out = tmp_path / "s"
+    rc = cli.main(["simulate", "-o", str(out), *_TINY_CLI, "--exposure", "0.02", "--preset", "dark",
+                   "--hot-pixels", "0.01", "--hot-rate", "300", "--leak-rate", "0.4",
+                   "--frame-response", "linear", "--theta-on", "0.15", "--theta-off", "0.3",
+                   "--motion-scale", "0.8"])
+    assert rc == 0
+    doc = json.loads((out / "scene.json").read_text())
+    assert doc["frame_response"] == "linear"
+    assert cv2.imread(str(out / doc["frames"][0]["path"]), cv2.IMREAD_UNCHANGED).dtype == np.uint16
+    sim = json.loads((out / "gt" / "sim.json").read_text())
+    assert sim["hot_pixel_fraction"] == 0.01 and sim["hot_pixel_rate_hz"] == 300.0
+    assert sim["leak_rate_hz"] == 0.4 and sim["preset"] == "dark" and sim["motion_scale"] == 0.8
+    assert sim["theta_on"] == 0.15 and sim["theta_off"] == 0.3 and sim["hot_pixels"] == 4
+
+
+def test_cli_sweep_seed_draws_the_scene_and_records_the_truth(tmp_path, capsys, only_simulate_verb):
+    from fusiongs.sim.sweep import sweep_scene_config
+
+    out = tmp_path / "s"
+    rc = cli.main(["simulate", "-o", str(out), "--sweep-seed", "1004", "--split", "test", *_TINY_CLI])
+    assert rc == 0 and "sweep seed 1004, test" in capsys.readouterr().out
+    cfg = sweep_scene_config(1004, "test")
+    sim = json.loads((out / "gt" / "sim.json").read_text())
+    assert sim["sweep"] == {"seed": 1004, "split": "test"}
+    assert sim["theta_on"] == cfg.dvs.theta_on and sim["theta_off"] == cfg.dvs.theta_off
+    assert sim["preset"] == cfg.preset and sim["exposure"] == cfg.exposure
+    assert sim["config"]["width"] == 24 and sim["config"]["frames"] == 1
+    assert json.loads((out / "scene.json").read_text())["frame_response"] == cfg.frame_response
+
+
 @pytest.mark.parametrize("args, option", [
     (["--preset", "moon"], "--preset"), (["--size", "100"], "--size"), (["--size", "4x4"], "--size"),
     (["--cfa", "RGBG"], "--cfa"), (["--seed", "x"], "--seed"), (["--duration", "-1"], "--duration"),
+    (["--hot-pixels", "2"], "--hot-pixels"), (["--hot-rate", "x"], "--hot-rate"),
+    (["--leak-rate", "-1"], "--leak-rate"), (["--frame-response", "log"], "--frame-response"),
+    (["--motion-scale", "0"], "--motion-scale"), (["--split", "test"], "--split"),
+    (["--sweep-seed", "5", "--split", "test"], "--sweep-seed"), (["--sweep-seed", "x"], "--sweep-seed"),
+    (["--sweep-seed", "1000"], "--sweep-seed"), (["--sweep-seed", "3", "--split", "dev"], "--split"),
+    (["--sweep-seed", "3", "--theta-on", "0.2"], "--theta-on"),
+    (["--sweep-seed", "3", "--preset", "wall"], "--preset"),
+    (["--sweep-seed", "3", "--frames", "40"], "--frames"),
 ])
 def test_cli_bad_arguments_exit_2_with_one_line(tmp_path, capsys, only_simulate_verb, args, option):
     rc = cli.main(["simulate", "-o", str(tmp_path / "s"), *args])
