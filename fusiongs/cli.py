@@ -14,7 +14,8 @@ import sys
 from fusiongs import __version__
 from fusiongs.errors import FusionGSError
 
-VERBS: tuple[str, ...] = ("demo", "simulate", "convert", "inspect", "edi", "deblur", "render", "eval")
+VERBS: tuple[str, ...] = ("demo", "simulate", "convert", "inspect", "calibrate", "edi", "deblur", "render",
+                         "eval")
 
 
 def build_parser() -> argparse.ArgumentParser:

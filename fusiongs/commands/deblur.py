@@ -13,6 +13,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", default=None,
                    help="YAML config (default: built-in defaults = configs/deblur.yaml)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--calibration", default=None, metavar="FILE",
+                   help="calibration.json from `fusiongs calibrate` (default: estimate the same way)")
     p.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. optim.iterations=500 events.loss=band")
 
@@ -20,5 +22,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from fusiongs.train.pipeline import run_deblur
 
-    run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume)
+    run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
+               calibration=args.calibration)
     return 0

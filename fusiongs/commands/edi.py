@@ -11,7 +11,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", help="scene folder (or its scene.json)")
     parser.add_argument("-o", "--output", required=True, help="folder for OUT/<frame stem>.png")
     parser.add_argument("--theta", type=float, nargs="+", metavar="THETA",
-                        help="contrast threshold, or ON and OFF thresholds (default: estimate per frame)")
+                        help="contrast threshold, or ON and OFF thresholds (default: estimate them as "
+                             "`fusiongs calibrate` does)")
+    parser.add_argument("--calibration", default=None, metavar="FILE",
+                        help="calibration.json from `fusiongs calibrate` (ON/OFF per channel)")
     parser.add_argument("--samples", type=int, default=32,
                         help="instants the exposure mean is taken over (default 32)")
     parser.add_argument("--bits", type=int, choices=(8, 16), default=8, help="PNG bit depth (default 8)")
@@ -36,6 +39,12 @@ def run(args: argparse.Namespace) -> int:
         if len(args.theta) not in (1, 2):
             raise InputError("command line", "--theta", "one threshold or an ON OFF pair", args.theta)
         theta = args.theta[0] if len(args.theta) == 1 else tuple(args.theta)
+    if args.calibration is not None:
+        if theta is not None:
+            raise InputError("command line", "--calibration", "either --theta or --calibration", "both")
+        from fusiongs.events.thresholds import read_calibration
+
+        theta = read_calibration(args.calibration)[0]
     if args.samples < 1:
         raise InputError("command line", "--samples", "a positive integer", args.samples)
     scene = load_scene(args.scene, sort_events=args.sort, drop_invalid_events=args.drop_invalid)

@@ -11,9 +11,10 @@ convention of :meth:`EventStream.count_maps` (an event at ``t_e`` counts for ``t
 ``theta_+`` for ON and ``theta_-`` for OFF events: ``theta E = theta_+ dN_+ - theta_- dN_-``.
 
 Grey events scale every colour channel by the same ratio. Colour (CFA) events give each raw
-pixel the ratio of its own channel; the ratio map is demosaiced (bilinear, float) to three
-channels before dividing. An unknown threshold is estimated per frame from the events' edges
-(:func:`estimate_theta`).
+pixel the ratio of its own channel (with that channel's thresholds when they are given per
+channel); the ratio map is demosaiced (bilinear, float) to three channels before dividing. Unknown
+thresholds come from :mod:`fusiongs.eval.calibrate` (ON and OFF per channel); :func:`estimate_theta`
+is the single-frame sharpness estimate of one symmetric threshold.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 from fusiongs.errors import InputError
 from fusiongs.events.cfa import cfa_channel_index, demosaic
 from fusiongs.events.stream import EventStream
+from fusiongs.events.thresholds import SensorThresholds
 
 THETA_GRID = tuple(np.round(np.geomspace(0.02, 0.8, 33), 4))
 
@@ -37,6 +39,23 @@ def _thetas(theta) -> tuple[float, float]:
     if not (np.isfinite(tp) and np.isfinite(tn) and tp > 0 and tn > 0):
         raise InputError("edi", "theta", "positive contrast thresholds", (tp, tn))
     return tp, tn
+
+
+def threshold_maps(theta, cfa: str | None, height: int, width: int):
+    """``(theta_pos, theta_neg)`` per pixel: floats, or ``[H, W]`` maps for per-channel CFA thresholds.
+
+    Args:
+        theta: a threshold, a ``(theta_pos, theta_neg)`` pair, or :class:`SensorThresholds` (one pair
+            per channel of a CFA sensor is looked up at every pixel's own channel).
+        cfa: the event sensor's CFA (None = grey).
+    """
+    if not isinstance(theta, SensorThresholds):
+        return _thetas(theta)
+    th = theta.for_sensor(cfa, "edi")
+    if th.n_channels == 1:
+        return float(th.theta_pos[0]), float(th.theta_neg[0])
+    ch = cfa_channel_index(cfa, height, width).astype(np.int64)
+    return th.theta_pos[ch], th.theta_neg[ch]
 
 
 def event_count_samples(events: EventStream, t_start: float, t_end: float, n_samples: int
@@ -79,7 +98,7 @@ def edi_ratio(counts: np.ndarray, theta, cfa: str | None) -> np.ndarray:
     Returns:
         ``[H, W, 1]`` float64 for grey events, ``[H, W, 3]`` (bilinear-demosaiced) for a CFA.
     """
-    tp, tn = _thetas(theta)
+    tp, tn = threshold_maps(theta, cfa, counts.shape[-2], counts.shape[-1])
     e = tp * counts[:, 0].astype(np.float64) - tn * counts[:, 1]
     r = np.exp(e).mean(axis=0)
     if cfa is None:
@@ -149,8 +168,8 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
         frame_linear: ``[H, W, C]`` blurry frame in linear light (C = 1 or 3; 3 for CFA events).
         events: time-sorted stream of the same sensor (µs clock = seconds x 1e6).
         t_start, t_end: exposure window in seconds.
-        theta: contrast threshold, a ``(theta_pos, theta_neg)`` pair, or ``None`` to estimate it
-            with :func:`estimate_theta`.
+        theta: contrast threshold, a ``(theta_pos, theta_neg)`` pair, :class:`SensorThresholds`, or
+            ``None`` to estimate one symmetric threshold with :func:`estimate_theta`.
         n_samples: instants ``M`` the exposure mean is taken over.
 
     Returns:
@@ -163,73 +182,29 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
     return (b / edi_ratio(counts, theta, events.cfa)).astype(np.float32)
 
 
-def _between_mids(events: EventStream, t_a: float, t_b: float) -> np.ndarray:
-    """``[2, H, W]`` ON/OFF counts from one mid-exposure ``t_a`` to the next ``t_b`` (seconds)."""
-    return events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6))).astype(np.float64)
-
-
-def estimate_theta_sequence(frames_linear: np.ndarray, events: EventStream, t_start, t_end,
-                            n_samples: int = 32, grid=THETA_GRID) -> float:
-    """One threshold for a frame sequence from the consistency of consecutive EDI images.
-
-    With the right ``theta`` the EDI image of frame i, carried to the next mid-exposure by the
-    events in between, equals the EDI image of frame i+1 (the multiple-frame consistency of Pan et
-    al., CVPR 2019, Sec. 4): ``log L_{i+1} - log L_i = theta_+ N_+ - theta_- N_-``. The estimate
-    minimises the mean absolute residual of that relation over all consecutive pairs, in each
-    pixel's own channel for CFA events (luminance for grey events).
-
-    Args:
-        frames_linear: ``[F, H, W, C]`` blurry frames in linear light, F >= 2, time-ordered.
-        events: the stream; ``t_start``, ``t_end``: ``[F]`` exposure windows (s).
-        n_samples, grid: as :func:`estimate_theta`.
-
-    Returns:
-        the best threshold of ``grid`` (one value for both polarities).
-    """
-    f = np.asarray(frames_linear, dtype=np.float64)
-    if f.ndim != 4 or f.shape[0] < 2:
-        raise InputError("edi", "frames", "at least two frames [F, H, W, C] for a sequence estimate",
-                         f.shape)
-    ts, te = np.asarray(t_start, dtype=np.float64), np.asarray(t_end, dtype=np.float64)
-    mids = 0.5 * (ts + te)
-    counts = [event_count_samples(events, float(a), float(b), n_samples) for a, b in zip(ts, te)]
-    between = [_between_mids(events, mids[i], mids[i + 1]) for i in range(len(f) - 1)]
-    if events.cfa is None:
-        pick = lambda img: img.mean(axis=-1)  # luminance-like mean of the channels
-    else:
-        ch = cfa_channel_index(events.cfa, events.height, events.width).astype(np.int64)
-        pick = lambda img: np.take_along_axis(img, ch[..., None], axis=-1)[..., 0]
-    eps = 1e-3 * max(float(f.mean()), 1e-12)
-    scores = []
-    for th in grid:  # a few candidate thresholds, each a vectorised image operation
-        logs = [np.log(np.maximum(pick(f[i] / edi_ratio(counts[i], th, events.cfa)), eps))
-                for i in range(len(f))]
-        res = [logs[i + 1] - logs[i] - th * (between[i][0] - between[i][1]) for i in range(len(between))]
-        scores.append(float(np.mean(np.abs(np.stack(res)))))
-    return float(grid[int(np.argmin(scores))])
-
-
 def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
     """EDI-deblur every frame of a :class:`~fusiongs.io.scene.Scene`.
 
     Args:
         scene: a scene with events and frames.
-        theta: threshold, polarity pair, or ``None`` to estimate one: from the consistency of
-            consecutive frames (:func:`estimate_theta_sequence`) when there are two or more, else
-            per frame (:func:`estimate_theta`).
+        theta: threshold, ``(theta_pos, theta_neg)`` pair, :class:`SensorThresholds` (per CFA
+            channel), or ``None`` to estimate them with the estimator of ``fusiongs calibrate``
+            (:func:`fusiongs.eval.calibrate.estimate_thresholds`).
         n_samples: instants per exposure.
 
     Returns:
         ``[F, H, W, C]`` float32 linear images at the frames' mid-exposure times.
     """
-    if scene.events is None:
+    if scene.events is None or len(scene.events) == 0:
         raise InputError("edi", "events", "a scene with an event stream", "none")
     fs = scene.frames
     if len(fs) == 0:
         raise InputError("edi", "frames", "a scene with at least one frame", "none")
+    if theta is None:
+        from fusiongs.eval.calibrate import estimate_thresholds
+
+        theta = estimate_thresholds(fs, scene.events)
     lin = fs.to_linear()
-    if theta is None and len(fs) >= 2:
-        theta = estimate_theta_sequence(lin, scene.events, fs.t_start, fs.t_end, n_samples)
     out = [edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), theta,
                       n_samples) for i in range(len(fs))]  # loop over frames, not pixels
     return np.stack(out)

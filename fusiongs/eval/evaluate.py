@@ -48,8 +48,9 @@ def _mean(values: list[float]) -> float:
 
 def format_table(result: dict) -> str:
     """The mean table as text: one line per (group, method)."""
-    lines = [f"{'views':<8}{'method':<10}{'n':>4}{'PSNR':>9}{'SSIM':>8}"]
+    w = max([10] + [len(m) + 2 for by in result["mean"].values() for m in by])
+    lines = [f"{'views':<8}{'method':<{w}}{'n':>4}{'PSNR':>9}{'SSIM':>8}"]
     for g, by in result["mean"].items():
         for method, m in by.items():
-            lines.append(f"{g:<8}{method:<10}{m['n']:>4}{m['psnr']:>9.2f}{m['ssim']:>8.3f}")
+            lines.append(f"{g:<8}{method:<{w}}{m['n']:>4}{m['psnr']:>9.2f}{m['ssim']:>8.3f}")
     return "\n".join(lines)

@@ -15,8 +15,6 @@ Both start at zero, so at initialisation the threshold equals the scalar everywh
 
 from __future__ import annotations
 
-import math
-
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -29,7 +27,8 @@ class ContrastThreshold(nn.Module):
 
     Args:
         channels: 1 (grey sensor, or one threshold shared by colours) or 3 (per RGB channel).
-        init: initial threshold (log-intensity units), one float or ``(theta_+, theta_-)``.
+        init: initial threshold (log-intensity units): one float, ``(theta_+, theta_-)``, or a
+            ``[2, channels]`` array (row 0 ON, row 1 OFF; e.g. from ``fusiongs calibrate``).
         grid: optional ``(gh, gw)`` size of the spatial log-offset grid (e.g. ``(6, 8)``).
         image_size: ``(H, W)`` of the sensor in pixels; needed for flat pixel indices.
         time_knots: number of drift knots (0 = no drift, else >= 2).
@@ -46,14 +45,20 @@ class ContrastThreshold(nn.Module):
         time_range: tuple[float, float] = (0.0, 1.0),
     ):
         super().__init__()
-        pair = (init, init) if isinstance(init, int | float) else tuple(init)
-        if channels not in (1, 3) or len(pair) != 2 or not all(v > 0 for v in pair):
-            raise InputError("ContrastThreshold", "channels/init", "1 or 3 channels, init > 0",
+        if isinstance(init, int | float):
+            init = (init, init)
+        s0 = torch.as_tensor(init, dtype=torch.float64)
+        if s0.ndim == 1 and s0.shape == (2,):
+            s0 = s0[:, None].expand(2, channels)
+        if (channels not in (1, 3) or s0.shape != (2, channels) or not bool(torch.isfinite(s0).all())
+                or not bool((s0 > 0).all())):
+            raise InputError("ContrastThreshold", "channels/init",
+                             "1 or 3 channels, init > 0 as a float, a pair or [2, channels]",
                              f"{channels}, {init}")
         if time_knots == 1 or time_knots < 0 or (time_knots and not time_range[1] > time_range[0]):
             raise InputError("ContrastThreshold", "time_knots/time_range", "0 or >= 2 knots, t1 > t0",
                              f"{time_knots}, {time_range}")
-        s0 = torch.tensor([[math.log(v)] * channels for v in pair], dtype=torch.float32)
+        s0 = torch.log(s0).to(torch.float32).contiguous()
         self.register_buffer("log_theta_init", s0)
         self.log_theta = nn.Parameter(s0.clone())  # [2, C]
         self.image_size = image_size

@@ -27,20 +27,32 @@ def resolve_config(config: str | Path | None, overrides: Sequence[str]) -> Deblu
     return load_config(DeblurConfig, config, overrides)
 
 
-def baseline_images(scene: Scene) -> dict[str, dict[str, np.ndarray]]:
-    """Blurry input and EDI (estimated θ) as sRGB, keyed ``deblur_<stem>`` like the truth."""
+def baseline_images(scene: Scene, thresholds=None) -> dict[str, dict[str, np.ndarray]]:
+    """Blurry input and EDI as sRGB, keyed ``deblur_<stem>`` like the truth.
+
+    ``"edi"`` uses ``thresholds`` (the run's calibration; estimated when None); when the scene is
+    simulated and knows its true thresholds, ``"edi_true_theta"`` is EDI with those (the honest
+    peer, METHOD.md section 8).
+    """
     from fusiongs.eval.edi import edi_scene
+    from fusiongs.eval.truth import true_thresholds
     from fusiongs.train.outputs import frames_srgb
 
     if len(scene.frames) == 0:
         return {}
     names = [f"deblur_{n}" for n in scene.frames.names]
     out = {"blurry": dict(zip(names, frames_srgb(scene)))}
-    if scene.events is not None and len(scene.events) and len(scene.frames):
-        edi = edi_scene(scene, theta=None)
+    if scene.events is None or not len(scene.events):
+        return out
+    runs = {"edi": thresholds}
+    truth = true_thresholds(scene.root, scene.events.cfa) if scene.root is not None else None
+    if truth is not None:
+        runs["edi_true_theta"] = truth
+    for key, th in runs.items():
+        edi = edi_scene(scene, theta=th)
         if edi.shape[-1] == 1:
             edi = np.repeat(edi, 3, axis=-1)
-        out["edi"] = dict(zip(names, linear_to_srgb(np.clip(edi, 0, 1)).astype(np.float32)))
+        out[key] = dict(zip(names, linear_to_srgb(np.clip(edi, 0, 1)).astype(np.float32)))
     return out
 
 
@@ -57,7 +69,7 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     gt = read_gt(gt_dir, ours.keys())
     if not gt:
         return None
-    methods = {"fusiongs": ours, **baseline_images(scene)}
+    methods = {"fusiongs": ours, **baseline_images(scene, tr.initial_thresholds)}
     result = compare_methods(methods, gt)
     if len(scene.frames) == 0:  # event-only: brightness and colour balance are not observable
         result["affine_fit"] = compare_methods(methods, gt, affine=True)
@@ -73,15 +85,25 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
 
 
 def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | None = None,
-               overrides: Sequence[str] = (), resume: bool = False, log=print) -> dict | None:
-    """Fit, write every output of ``fusiongs deblur`` into ``out``, and evaluate when truth exists."""
+               overrides: Sequence[str] = (), resume: bool = False, log=print,
+               calibration: str | Path | None = None) -> dict | None:
+    """Fit, write every output of ``fusiongs deblur`` into ``out``, and evaluate when truth exists.
+
+    ``calibration``: a ``calibration.json`` from ``fusiongs calibrate`` (the starting thresholds);
+    without it they are estimated the same way. Either way they are written to
+    ``out/calibration.json``.
+    """
+    from fusiongs.events.thresholds import read_calibration, write_calibration
     from fusiongs.train.outputs import write_outputs
 
     cfg = resolve_config(config, overrides)
+    calib = read_calibration(calibration)[0] if calibration is not None else None
     scene = load_scene(scene_path)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    tr = train(scene, cfg, out, resume=resume)
+    tr = train(scene, cfg, out, resume=resume, calibration=calib)
+    if tr.initial_thresholds is not None:
+        write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     images = write_outputs(tr, scene, out)

@@ -109,7 +109,7 @@ class ThresholdSettings:
 class PriorSettings:
     edi_weight: float = 0.0          # weight of L1(mid-exposure render, EDI image) (DiET-GS-style prior)
     edi_until: int = 0               # iterations the EDI prior is on (weight decays linearly to 0)
-    edi_theta: float = 0.0           # θ of the EDI images; 0 = estimated from consecutive frames
+    edi_theta: float = 0.0           # θ of the EDI images; 0 = the calibration (ON/OFF per channel)
 
 
 @dataclass

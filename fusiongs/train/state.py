@@ -99,12 +99,13 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
 
 
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
-                device: torch.device, theta_init: float | None = None,
+                device: torch.device, theta_init=None,
                 init_images: torch.Tensor | None = None) -> FusionState:
     """Initial state: Gaussians from :func:`initial_gaussians` with the cameras at the frame times.
 
     Args:
-        theta_init: starting contrast threshold; ``cfg.threshold.init`` when None.
+        theta_init: starting contrast thresholds (a float, an ON/OFF pair or ``[2, C]``);
+            ``cfg.threshold.init`` when None.
         init_images: ``[F, H, W, C]`` linear images for ``init.method = "stereo"``.
     """
     theta_init = cfg.threshold.init if theta_init is None else theta_init
@@ -117,6 +118,10 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         c2w = trajectory.c2w(t_init).to(torch.float32)
     model = initial_gaussians(data, c2w, cfg, gen, init_images)
     channels = 3 if data.cfa_index is not None else 1
+    init = np.asarray(theta_init, dtype=np.float64)
+    if init.ndim == 2 and init.shape[1] != channels:  # per-channel values for a per-channel model only
+        init = init.mean(axis=1, keepdims=True) if channels == 1 else np.repeat(init[:, :1], 3, axis=1)
+    theta_init = init if init.ndim else float(init)
     th = cfg.threshold
     threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,
                                   image_size=(data.camera.height, data.camera.width),

@@ -8,6 +8,7 @@ history, progress bar and checkpoints.
 from __future__ import annotations
 
 import math
+import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -18,6 +19,8 @@ import torch
 
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
+from fusiongs.errors import InputError
+from fusiongs.events.thresholds import SensorThresholds
 from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
@@ -60,6 +63,7 @@ class Trained:
     history: History
     iteration: int
     poses: PoseSamples
+    initial_thresholds: SensorThresholds | None = None  # where θ started (calibration)
 
 
 def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
@@ -131,8 +135,12 @@ def _restore(ckpt: dict[str, Any], state: FusionState) -> None:
         state.log_gain.copy_(ckpt["log_gain"])
 
 
-def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False) -> Trained:
+def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False,
+          calibration: SensorThresholds | None = None) -> Trained:
     """Fit the scene; checkpoints go to ``out_dir/checkpoint.pt`` (also on Ctrl-C).
+
+    ``calibration`` gives the starting ON/OFF thresholds (``fusiongs calibrate``); without it they
+    are estimated the same way (:func:`initial_theta`).
 
     The progress bar shows the loss, the number of Gaussians and a running PSNR of the re-rendered
     blurry frames against the captured ones.
@@ -143,12 +151,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     torch.manual_seed(cfg.seed)
     gen = torch.Generator().manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
-    theta0 = initial_theta(scene, data, cfg)
+    theta0 = initial_theta(scene, data, cfg, calibration)
     wants_edi = cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)
     if wants_edi and data.events is not None and data.n_frames:
-        # θ of the EDI images: configured, else the consecutive-frame estimate (reused, not redone)
-        data.edi = edi_images(scene, cfg.priors.edi_theta or (theta0 if _estimates_theta(cfg, data)
-                                                               else 0.0), device)
+        # thresholds of the EDI images: configured, else the calibration (reused, not redone)
+        data.edi = edi_images(scene, cfg.priors.edi_theta or theta0, device)
     if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
         eo = cfg.event_only
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
@@ -156,7 +163,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
-    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0,
+    state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
     start, history = 0, History()
@@ -173,7 +180,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if k in ckpt.get("optimizers", {}):
                 o.load_state_dict(ckpt["optimizers"][k])
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
-    tr = Trained(state, data, cfg, history, start, scene.poses)
+    tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
     order = torch.randperm(max(data.n_frames, 1), generator=gen)
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
                disable=not cfg.output.progress, desc="fusiongs", dynamic_ncols=True)
@@ -241,20 +248,27 @@ def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tenso
     return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))
 
 
-def _estimates_theta(cfg: DeblurConfig, data: TrainData) -> bool:
-    """Whether θ starts from the EDI consecutive-frame estimate (enabled, events, >= 2 frames)."""
-    return bool(cfg.threshold.estimate and data.events is not None and data.n_frames >= 2)
+def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
+                  calibration: SensorThresholds | None = None) -> SensorThresholds:
+    """Thresholds to start from (METHOD.md section 4): ``calibration`` when given, else the
+    estimate of ``fusiongs calibrate`` when ``threshold.estimate`` is on and there are events,
+    else ``threshold.init`` for both polarities. One pair per CFA channel for colour events."""
+    from fusiongs.events.thresholds import SensorThresholds
 
+    cfa = scene.events.cfa if scene.events is not None else None
+    if calibration is not None:
+        return calibration.for_sensor(cfa)
+    if not (cfg.threshold.estimate and data.events is not None and len(scene.events)):
+        return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
+    from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 
-def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig) -> float:
-    """θ to start from: the EDI consecutive-frame estimate when enabled and possible, else the
-    configured ``threshold.init`` (METHOD.md §4-5)."""
-    if not _estimates_theta(cfg, data):
-        return cfg.threshold.init
-    from fusiongs.eval.edi import estimate_theta_sequence
-
-    fs = scene.frames
-    return estimate_theta_sequence(fs.to_linear(), data.events, fs.t_start, fs.t_end)
+    opts = CalibrateOptions(unknown_scale=cfg.threshold.init)
+    try:
+        return estimate_thresholds(scene.frames, scene.events, opts).for_sensor(cfa)
+    except InputError as e:  # too little data to measure: say so, start from threshold.init
+        print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
+              f"{cfg.threshold.init}", file=sys.stderr)
+        return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

@@ -183,15 +183,16 @@ def test_edi_command_writes_one_png_per_frame(grey_data, tmp_path):
     assert _psnr(got, truth) > _psnr(linear_to_srgb(blurry), truth) + 8.0
 
 
-@pytest.mark.parametrize("seed", [1, 2])
-def test_sequence_threshold_estimate_is_near_the_simulated_threshold(seed):
-    from fusiongs.eval.edi import estimate_theta_sequence
-    from fusiongs.sim.simulate import SimConfig, run_simulation
+def test_per_channel_thresholds_use_each_pixels_own_channel():
+    from fusiongs.eval.edi import edi_ratio
+    from fusiongs.events.thresholds import RGB_CHANNELS, SensorThresholds
 
-    cfg = SimConfig(preset="wall", width=48, height=36, duration=0.3, frames=3, exposure=0.05,
-                    dvs_rate_hz=800.0, blur_samples=8, supersample=1, novel=0, seed=seed)
-    res = run_simulation(cfg)
-    fs = res.scene.frames
-    theta = estimate_theta_sequence(fs.to_linear(), res.scene.events, fs.t_start, fs.t_end)
-    nominal = 0.5 * (cfg.dvs.theta_on + cfg.dvs.theta_off)
-    assert abs(theta - nominal) < 0.25 * nominal
+    counts = np.zeros((2, 2, 4, 4), np.int32)
+    counts[:, 0] = 1  # one ON event before every sample at every pixel
+    th = SensorThresholds(RGB_CHANNELS, np.array([0.1, 0.2, 0.3]), np.ones(3), np.zeros(3), np.zeros(3))
+    from fusiongs.events.cfa import cfa_channel_index, mosaic
+
+    r = edi_ratio(counts, th, "RGGB")  # demosaiced: each channel's own ratio where it is sampled
+    ch = cfa_channel_index("RGGB", 4, 4)
+    raw = np.asarray(mosaic(r, "RGGB"))
+    np.testing.assert_allclose(raw, np.exp(np.array([0.1, 0.2, 0.3])[ch]), rtol=1e-6)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -63,14 +64,19 @@ def test_edi_prior_is_used_while_on(colour_scene, tmp_path):
     assert all(math.isnan(v) for v in tr.history.edi[4:])
 
 
-def test_threshold_starts_from_the_edi_estimate_unless_disabled(colour_scene):
-    from fusiongs.eval.edi import estimate_theta_sequence
+def test_threshold_starts_from_the_calibration_unless_disabled(colour_scene):
+    from fusiongs.eval.calibrate import estimate_thresholds
+    from fusiongs.events.thresholds import SensorThresholds
     from fusiongs.train.data import prepare_data
     from fusiongs.train.trainer import initial_theta
 
-    fs = colour_scene.frames
-    expected = estimate_theta_sequence(fs.to_linear(), colour_scene.events, fs.t_start, fs.t_end)
+    expected = estimate_thresholds(colour_scene.frames, colour_scene.events)
     data = prepare_data(colour_scene, torch.device("cpu"), True)
-    assert initial_theta(colour_scene, data, resolve_config(None, [])) == expected
+    got = initial_theta(colour_scene, data, resolve_config(None, []))
+    assert got.channels == ("R", "G", "B")
+    np.testing.assert_allclose(got.as_array(), expected.as_array())
     off = resolve_config(None, ["threshold.estimate=false", "threshold.init=0.3"])
-    assert initial_theta(colour_scene, data, off) == 0.3
+    np.testing.assert_allclose(initial_theta(colour_scene, data, off).as_array(), 0.3)
+    given = SensorThresholds.uniform(0.2, 0.4, None)  # a grey calibration serves every channel
+    np.testing.assert_allclose(initial_theta(colour_scene, data, off, given).as_array(),
+                               [[0.2] * 3, [0.4] * 3])

@@ -58,7 +58,10 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     theta = json.loads((tiny_run / "thresholds.json").read_text())
     assert len(theta["theta_pos"]) == 1 and theta["theta_pos"][0] > 0
     metrics = json.loads((tiny_run / "metrics.json").read_text())
-    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "blurry", "edi"}
+    # a simulated scene knows its true thresholds: EDI with them is printed beside EDI estimated
+    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "blurry", "edi", "edi_true_theta"}
+    calib = json.loads((tiny_run / "calibration.json").read_text())
+    assert calib["format"] == "fusiongs-calibration" and calib["thresholds"]["channels"] == ["grey"]
     assert "novel" in metrics["mean"]
     assert read_image(tiny_run / "report.png").shape[1] > 100
     assert not list(tiny_run.rglob("*.tmp*")), "no temporary files are left behind"

@@ -1,0 +1,86 @@
+"""``fusiongs calibrate SCENE``: the event sensor's ON / OFF contrast thresholds per colour channel."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "Estimate the event sensor's ON/OFF contrast thresholds (per CFA channel) from frames and events."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", help="scene folder (or its scene.json)")
+    parser.add_argument("-o", "--output", default="calibration.json",
+                        help="calibration file to write, or a folder for OUT/calibration.json "
+                             "(default ./calibration.json)")
+    parser.add_argument("--json", action="store_true", help="print the calibration as one JSON object")
+    parser.add_argument("--samples", type=int, default=None,
+                        help="instants per exposure of the EDI ratio (default 12)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the pixel subsets and bootstrap")
+    parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
+    parser.add_argument("--drop-invalid", action="store_true",
+                        help="drop events outside the sensor instead of failing")
+
+
+def output_file(path: str):
+    """``path`` itself when it names a ``.json`` file, else ``path/calibration.json``."""
+    from pathlib import Path
+
+    p = Path(path)
+    return p if p.suffix.lower() == ".json" else p / "calibration.json"
+
+
+def run(args: argparse.Namespace) -> int:
+    import dataclasses
+    import json
+    import sys
+    import time
+
+    from fusiongs.errors import InputError
+    from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
+    from fusiongs.eval.truth import true_thresholds
+    from fusiongs.events.thresholds import calibration_document, write_calibration
+    from fusiongs.io.scene_io import load_scene
+
+    opts = CalibrateOptions(seed=args.seed)
+    if args.samples is not None:
+        if args.samples < 2:
+            raise InputError("command line", "--samples", "an integer >= 2", args.samples)
+        opts = dataclasses.replace(opts, n_samples=args.samples)
+    scene = load_scene(args.scene, sort_events=args.sort, drop_invalid_events=args.drop_invalid)
+    if scene.events is None or len(scene.events) == 0:
+        raise InputError(args.scene, "events", "a scene with events (thresholds are measured from them)",
+                         "no events")
+    t0 = time.perf_counter()
+    th = estimate_thresholds(scene.frames, scene.events, opts)
+    seconds = time.perf_counter() - t0
+    truth = true_thresholds(args.scene, scene.events.cfa)
+    extra = {"scene": str(args.scene), "seconds": round(seconds, 3)}
+    if truth is not None:
+        extra["truth"] = truth.to_dict()
+    out = write_calibration(output_file(args.output), th, **extra)
+    if args.json:
+        print(json.dumps(calibration_document(th, **extra)))
+        return 0
+    print(format_table(th, truth))
+    if not th.scale_known:
+        print("note: no frames, so the thresholds are known only up to a common scale: the ON/OFF "
+              f"ratio is measured, the scale assumed ({th.details.get('assumed_scale')})", file=sys.stderr)
+    print(f"wrote {out} ({th.method}; {seconds:.1f} s)")
+    return 0
+
+
+def format_table(th, truth=None) -> str:
+    """A small text table: per channel ON, OFF (± one sigma), OFF/ON, and the truth when known."""
+    head = f"{'channel':<8} {'theta_on':>16} {'theta_off':>16} {'off/on':>7}"
+    if truth is not None:
+        head += f" {'true on':>8} {'true off':>8} {'err on':>7} {'err off':>7}"
+    rows = [head]
+    for c, name in enumerate(th.channels):
+        tp, tn = th.theta_pos[c], th.theta_neg[c]
+        row = (f"{name:<8} {tp:8.4f} ± {th.std_pos[c]:<5.3f} {tn:8.4f} ± {th.std_neg[c]:<5.3f} "
+               f"{tn / tp:7.3f}")
+        if truth is not None:
+            ttp, ttn = truth.theta_pos[c], truth.theta_neg[c]
+            row += f" {ttp:8.4f} {ttn:8.4f} {100 * (tp / ttp - 1):+6.1f}% {100 * (tn / ttn - 1):+6.1f}%"
+        rows.append(row)
+    return "\n".join(rows)

@@ -1,0 +1,447 @@
+"""Estimate an event sensor's ON / OFF contrast thresholds per colour channel from frames and events.
+
+The estimator is the multiple-frame consistency of EDI (Pan et al., CVPR 2019 Sec. 4; mEDI, TPAMI
+2020) with the two polarities kept apart, as METHOD.md section 4 asks. For frames ``i`` and ``i+1``
+with exposures ``[s, e]`` and linear sensor intensities ``S_i`` (the pixel's own CFA channel, or the
+Rec.601 luminance for a grey sensor), EDI gives the sharp mid-exposure intensity
+``L_i = S_i / R_i(theta)``, ``R_i = mean_k exp(theta_+ n_+(t_k) - theta_- n_-(t_k))`` with ``n``
+the event counts from mid-exposure to ``t_k``. Between the two mid-exposures the events say
+``log L_{i+1} - log L_i = theta_+ N_+ - theta_- N_-``, so the residual
+
+    ``r = log S_{i+1} - log R_{i+1} - log S_i + log R_i - theta_+ N_+ + theta_- N_- - b_i``
+
+vanishes at the true thresholds. ``b_i`` is a per-pair offset (the pair's median residual): it
+absorbs a change of exposure or gain between frames and the common drift of leak and noise events.
+The thresholds minimise the mean absolute residual over pixels and pairs, by a coarse-to-fine grid
+search over ``(theta_+, theta_-)`` per channel.
+
+Why two unknowns: with ``theta_+ != theta_-`` texture that moves back and forth makes the net count
+``N_+ - N_-`` drift while the log intensity returns to its start; one symmetric threshold can only
+absorb that drift by shrinking (METHOD.md section 4). Why L1 and the gates: background-activity and
+hot-pixel events are sparse errors in the regressors (a least-squares fit shrinks theta; the median
+is unmoved by a minority of outliers); refractory losses undercount fast edges, so pixels whose
+events come closer than twice the sensor's dead time (estimated from the inter-event intervals) are
+left out; saturated and near-black pixels (quantised, and compressed by the log offset of the
+sensor) are left out; hot pixels are spatial outliers of the event count.
+
+The uncertainty is a block bootstrap: spatial tiles of pixels are resampled and the argmin taken
+again on the finest grid.
+
+Without frames only the ON/OFF ratio is observable: over a recording the log intensities a sensor
+sees end about where they started on average over pixels, so ``theta_- / theta_+ = sum N_+ /
+sum N_-`` (per channel, hot pixels left out); the common scale is then an assumption. With a single
+frame the scale comes from the EDI sharpness estimate of that frame (:func:`estimate_theta`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from fusiongs.errors import InputError
+from fusiongs.eval.edi import estimate_theta, event_count_samples
+from fusiongs.events.cfa import cfa_channel_index
+from fusiongs.events.stream import EventStream
+from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
+from fusiongs.frames.frameset import FrameSet
+
+REC601 = (0.299, 0.587, 0.114)
+
+
+@dataclass(frozen=True)
+class CalibrateOptions:
+    """Settings of :func:`estimate_thresholds` (defaults chosen on tuning seeds only).
+
+    Attributes:
+        n_samples: instants per exposure of the EDI ratio ``R_i``.
+        max_pixels: pixels per channel used in the fine search (a seeded random subset).
+        min_pixels: fewest usable pixels per channel (fewer is an error).
+        coarse_pixels: pixels per channel used in the coarse grid search.
+        theta_range: ``(lo, hi)`` thresholds searched (log units).
+        coarse_steps: grid points per polarity in the coarse search (geometric spacing).
+        refine_levels: refinement rounds (each divides the grid step by 3).
+        dark: pixels darker than this fraction of the channel's 99th percentile are left out.
+        saturation: linear value at and above which a pixel counts as saturated.
+        hot_factor: a pixel is hot when its event count exceeds ``hot_factor`` times the median
+            count of its same-channel neighbours plus ``hot_floor``.
+        hot_floor: see ``hot_factor``.
+        refractory_gate: pixels with two events closer than this multiple of the estimated dead
+            time are left out of a pair (0 disables the gate).
+        tile: side in pixels of the bootstrap tiles.
+        bootstrap: bootstrap resamples for the uncertainty.
+        unknown_scale: geometric mean ``sqrt(theta_+ theta_-)`` assumed when there are no frames.
+        seed: seed of the pixel subsets and the bootstrap.
+    """
+
+    n_samples: int = 12
+    max_pixels: int = 24000
+    min_pixels: int = 10
+    coarse_pixels: int = 4000
+    theta_range: tuple[float, float] = (0.03, 1.5)
+    coarse_steps: int = 17
+    refine_levels: int = 3
+    dark: float = 0.03
+    saturation: float = 0.97
+    hot_factor: float = 5.0
+    hot_floor: float = 20.0
+    refractory_gate: float = 2.0
+    tile: int = 16
+    bootstrap: int = 200
+    unknown_scale: float = 0.25
+    seed: int = 0
+
+
+# ---------------------------------------------------------------------------- sensor views
+def sensor_intensity(linear: np.ndarray, cfa: str | None) -> np.ndarray:
+    """``[F, H*W]`` float64 linear intensity each event pixel sees, from ``[F, H, W, C]`` frames.
+
+    Grey sensors see the Rec.601 luminance of RGB frames (the frame itself when C = 1); colour
+    sensors see their own CFA channel of an RGB frame.
+    """
+    f, h, w, c = linear.shape
+    lin = linear.astype(np.float64, copy=False)
+    if cfa is None:
+        s = lin[..., 0] if c == 1 else lin @ np.asarray(REC601)
+    else:
+        if c != 3:
+            raise InputError("calibrate", "frames", "RGB frames for a colour (CFA) event sensor",
+                             f"{c} channel(s)")
+        ch = cfa_channel_index(cfa, h, w).astype(np.int64)
+        s = np.take_along_axis(lin, np.broadcast_to(ch[None, ..., None], (f, h, w, 1)), axis=-1)[..., 0]
+    return s.reshape(f, h * w)
+
+
+def pixel_channels(events: EventStream) -> np.ndarray:
+    """``[H*W]`` int64 channel of every pixel (0 for a grey sensor, 0/1/2 = R/G/B for a CFA)."""
+    if events.cfa is None:
+        return np.zeros(events.height * events.width, np.int64)
+    return cfa_channel_index(events.cfa, events.height, events.width).astype(np.int64).reshape(-1)
+
+
+def hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 20.0) -> np.ndarray:
+    """``[H*W]`` bool: pixels whose event count is a spatial outlier among same-channel neighbours.
+
+    A pixel is hot when its count exceeds ``factor`` times the median of its eight same-channel
+    neighbours (distance 2 on a CFA, 1 on a grey sensor) plus ``floor``.
+    """
+    from scipy.ndimage import median_filter
+
+    counts = events.pixel_counts().astype(np.float64)
+    step = 1 if events.cfa is None else 2
+    foot = np.zeros((2 * step + 1, 2 * step + 1), bool)
+    foot[::step, ::step] = True
+    foot[step, step] = False
+    med = median_filter(counts, footprint=foot, mode="mirror")
+    return (counts > factor * med + floor).reshape(-1)
+
+
+def dead_time_us(events: EventStream, jump: float = 20.0) -> float:
+    """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
+    between consecutive events of the same pixel.
+
+    A refractory period makes the interval histogram (log-spaced bins) jump at the dead time:
+    below it only noise and hot-pixel events meet a pixel's previous event, above it every fast
+    edge does. The estimate is the left edge of the first bin holding ``jump`` times more intervals
+    than the mean of the three bins before it (and at least 0.5 % of all intervals); 0 when the
+    histogram has no such jump.
+    """
+    if len(events) < 2:
+        return 0.0
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")
+    ps, ts = pix[order], events.t[order]
+    dt = (ts[1:] - ts[:-1])[ps[1:] == ps[:-1]]
+    if dt.size < 100:
+        return 0.0
+    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
+    h = np.histogram(dt, edges)[0].astype(np.float64)
+    for k in range(1, len(h)):
+        before = h[max(0, k - 3):k].mean()
+        if h[k] > jump * (before + 1.0) and h[k] >= 0.005 * dt.size:
+            return float(edges[k])
+    return 0.0
+
+
+def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) -> np.ndarray:
+    """``[len(edges) - 1, H*W]`` int32 number of events closer than ``gap_us`` to the previous event
+    of the same pixel, per time segment ``[edges[j], edges[j+1])``."""
+    hw = events.height * events.width
+    out = np.zeros((len(edges_us) - 1, hw), np.int32)
+    if gap_us <= 0 or len(events) < 2:
+        return out
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")
+    ps, ts = pix[order], events.t[order]
+    fast = np.zeros(len(events), bool)
+    fast[1:] = (ps[1:] == ps[:-1]) & ((ts[1:] - ts[:-1]) < gap_us)
+    seg = np.searchsorted(edges_us, ts[fast], side="right") - 1
+    ok = (seg >= 0) & (seg < len(edges_us) - 1)
+    np.add.at(out, (seg[ok], ps[fast][ok]), 1)
+    return out
+
+
+# ---------------------------------------------------------------------------- the objective
+@dataclass(frozen=True, eq=False)
+class PairData:
+    """Everything the consistency objective needs for one channel's selected pixels.
+
+    Attributes:
+        log_s: ``[F, P]`` log sensor intensity of the frames.
+        n: ``[F, M, 2, P]`` ON/OFF counts from each mid-exposure to each sample instant.
+        dn: ``[F-1, 2, P]`` ON/OFF counts between consecutive mid-exposures.
+        valid: ``[F-1, P]`` bool, pixel usable in the pair.
+        tile: ``[P]`` int64 bootstrap tile of every pixel.
+        n_tiles: number of tiles.
+    """
+
+    log_s: torch.Tensor
+    n: torch.Tensor
+    dn: torch.Tensor
+    valid: torch.Tensor
+    tile: torch.Tensor
+    n_tiles: int
+
+    def subset(self, idx: torch.Tensor) -> PairData:
+        return PairData(self.log_s[:, idx], self.n[..., idx], self.dn[..., idx], self.valid[:, idx],
+                        self.tile[idx], self.n_tiles)
+
+
+def tile_losses(data: PairData, theta_pos: torch.Tensor, theta_neg: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Sum of absolute consistency residuals per candidate and tile.
+
+    Args:
+        data: one channel's :class:`PairData`.
+        theta_pos, theta_neg: ``[G]`` candidate thresholds.
+
+    Returns:
+        ``([G, n_tiles] float64 summed |r - b|, [n_tiles] float64 residual count)``.
+    """
+    tp = theta_pos.to(torch.float32).reshape(-1, 1, 1, 1)
+    tn = theta_neg.to(torch.float32).reshape(-1, 1, 1, 1)
+    m = data.n.shape[1]
+    e = tp * data.n[None, :, :, 0] - tn * data.n[None, :, :, 1]  # [G, F, M, P]
+    log_r = torch.logsumexp(e, dim=2) - float(np.log(m))  # [G, F, P]
+    log_l = data.log_s[None] - log_r
+    step = tp[:, :, 0] * data.dn[None, :, 0] - tn[:, :, 0] * data.dn[None, :, 1]  # [G, F-1, P]
+    r = log_l[:, 1:] - log_l[:, :-1] - step
+    valid = data.valid[None].expand_as(r)
+    med = torch.where(valid, r, torch.full_like(r, float("nan"))).nanmedian(dim=2, keepdim=True).values
+    a = torch.where(valid, (r - torch.nan_to_num(med)).abs(), torch.zeros_like(r)).sum(dim=1)  # [G, P]
+    g = a.shape[0]
+    out = torch.zeros(g, data.n_tiles, dtype=torch.float64)
+    out.index_add_(1, data.tile, a.to(torch.float64))
+    cnt = torch.zeros(data.n_tiles, dtype=torch.float64)
+    cnt.index_add_(0, data.tile, data.valid.sum(0).to(torch.float64))
+    return out, cnt
+
+
+def _grid_losses(data: PairData, tp: np.ndarray, tn: np.ndarray, chunk: int = 16
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``tile_losses`` over a candidate list in chunks: ``([G, T], [T])`` numpy."""
+    outs, cnt = [], None
+    for i in range(0, len(tp), chunk):
+        o, cnt = tile_losses(data, torch.as_tensor(tp[i:i + chunk]), torch.as_tensor(tn[i:i + chunk]))
+        outs.append(o.numpy())
+    return np.concatenate(outs), cnt.numpy()
+
+
+def _grid(centre: tuple[float, float], step: float, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """A ``(2 half + 1)^2`` grid in log-threshold space around ``centre`` with log ``step``."""
+    k = np.arange(-half, half + 1) * step
+    lp, ln = np.meshgrid(np.log(centre[0]) + k, np.log(centre[1]) + k, indexing="ij")
+    return np.exp(lp.reshape(-1)), np.exp(ln.reshape(-1))
+
+
+def search_thresholds(data: PairData, opts: CalibrateOptions, rng: np.random.Generator) -> dict:
+    """Coarse-to-fine grid search of ``(theta_+, theta_-)`` for one channel, plus the bootstrap.
+
+    Returns:
+        ``{"theta_pos", "theta_neg", "std_pos", "std_neg", "loss", "pixels", "residuals"}``.
+    """
+    p = data.log_s.shape[1]
+    lo, hi = opts.theta_range
+    coarse = data if p <= opts.coarse_pixels else data.subset(
+        torch.as_tensor(np.sort(rng.choice(p, opts.coarse_pixels, replace=False))))
+    vals = np.geomspace(lo, hi, opts.coarse_steps)
+    step = float(np.log(vals[1] / vals[0]))
+    tp, tn = (a.reshape(-1) for a in np.meshgrid(vals, vals, indexing="ij"))
+    loss, cnt = _grid_losses(coarse, tp, tn)
+    tot = loss.sum(1) / max(cnt.sum(), 1.0)
+    best = (float(tp[np.argmin(tot)]), float(tn[np.argmin(tot)]))
+    for _ in range(opts.refine_levels):
+        step /= 3.0
+        tp, tn = _grid(best, step, 2)
+        loss, cnt = _grid_losses(data, tp, tn)
+        tot = loss.sum(1) / max(cnt.sum(), 1.0)
+        best = (float(tp[np.argmin(tot)]), float(tn[np.argmin(tot)]))
+    # Bootstrap over tiles on a final grid around the best (step 1.5 %).
+    tp, tn = _grid(best, 0.015, 3)
+    loss, cnt = _grid_losses(data, tp, tn)
+    used = cnt > 0
+    loss, cnt = loss[:, used], cnt[used]
+    tot = loss.sum(1) / max(cnt.sum(), 1.0)
+    i_best = int(np.argmin(tot))
+    std_p = std_n = float("nan")
+    if opts.bootstrap > 0 and cnt.size >= 4:
+        w = rng.multinomial(cnt.size, np.full(cnt.size, 1.0 / cnt.size), size=opts.bootstrap).astype(np.float64)
+        pick = np.argmin((w @ loss.T) / np.maximum(w @ cnt, 1.0)[:, None], axis=1)
+        std_p, std_n = float(np.std(tp[pick])), float(np.std(tn[pick]))
+    return {"theta_pos": float(tp[i_best]), "theta_neg": float(tn[i_best]), "std_pos": std_p,
+            "std_neg": std_n, "loss": float(tot[i_best]), "pixels": int(p), "residuals": int(cnt.sum())}
+
+
+# ---------------------------------------------------------------------------- data preparation
+def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray, pix: np.ndarray,
+                    bad_pair: np.ndarray, frame_ok: np.ndarray, width: int, tile: int) -> PairData:
+    """:class:`PairData` of the pixels ``pix`` (flat indices).
+
+    Args:
+        sens: ``[F, H*W]`` linear sensor intensity. counts: F arrays ``[M, 2, H*W]``.
+        between: ``[F-1, 2, H*W]`` counts between mid-exposures. pix: ``[P]`` selected pixels.
+        bad_pair: ``[F-1, H*W]`` bool, pixel excluded from a pair (refractory gate).
+        frame_ok: ``[F, H*W]`` bool, intensity neither saturated nor near black.
+        width: sensor width (tiles). tile: tile side in pixels.
+    """
+    log_s = np.log(np.maximum(sens[:, pix], 1e-12))
+    n = np.stack([c[..., pix] for c in counts]).astype(np.float32)
+    dn = between[..., pix].astype(np.float32)
+    active = (dn.sum(1) + np.abs(n[:-1]).sum((1, 2)) + np.abs(n[1:]).sum((1, 2))) > 0
+    valid = frame_ok[:-1, pix] & frame_ok[1:, pix] & ~bad_pair[:, pix] & active
+    x, y = pix % width, pix // width
+    tiles_x = (width + tile - 1) // tile
+    tid = (y // tile) * tiles_x + x // tile
+    uniq, tid = np.unique(tid, return_inverse=True)
+    return PairData(torch.as_tensor(log_s, dtype=torch.float32), torch.as_tensor(n),
+                    torch.as_tensor(dn), torch.as_tensor(valid), torch.as_tensor(tid.astype(np.int64)),
+                    int(uniq.size))
+
+
+def _check_inputs(frames: FrameSet, events: EventStream) -> None:
+    if events is None or len(events) == 0:
+        raise InputError("calibrate", "events", "a scene with events (thresholds are measured from them)",
+                         "no events")
+    if len(frames) and frames.images.shape[1:3] != (events.height, events.width):
+        raise InputError("calibrate", "frames", f"frames of the event sensor's size {events.width}x"
+                         f"{events.height}", f"{frames.images.shape[2]}x{frames.images.shape[1]}")
+
+
+def estimate_thresholds(frames: FrameSet, events: EventStream,
+                        opts: CalibrateOptions | None = None) -> SensorThresholds:
+    """ON / OFF thresholds per channel of an event sensor, with uncertainties.
+
+    Args:
+        frames: the scene's frames (possibly blurry; any response, linearised here). Two or more
+            give the consistency estimate; one gives a sharpness estimate of the scale; none gives
+            only the ON/OFF ratio (``scale_known`` False).
+        events: the time-sorted stream of the same pixel grid.
+        opts: settings (:class:`CalibrateOptions`).
+
+    Returns:
+        :class:`SensorThresholds` with ``channels`` ``("grey",)`` or ``("R", "G", "B")``.
+    """
+    opts = opts or CalibrateOptions()
+    _check_inputs(frames, events)
+    rng = np.random.default_rng(opts.seed)
+    hot = hot_pixels(events, opts.hot_factor, opts.hot_floor)
+    chan = pixel_channels(events)
+    names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS
+    ratio = _balance_ratio(events, chan, hot, len(names), opts, rng)
+    details = {"hot_pixels": int(hot.sum()), "events": int(len(events)), "frames": int(len(frames)),
+               "ratio_from_event_balance": [r["ratio"] for r in ratio]}
+    if len(frames) < 2:
+        return _without_pairs(frames, events, names, ratio, opts, details)
+    lin = frames.to_linear()
+    sens = sensor_intensity(lin, events.cfa)
+    f = len(frames)
+    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
+    mids = 0.5 * (ts + te)
+    counts = [event_count_samples(events, float(a), float(b), opts.n_samples).reshape(opts.n_samples, 2, -1)
+              for a, b in zip(ts, te)]
+    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)))
+                        .reshape(2, -1) for i in range(f - 1)])
+    dead = dead_time_us(events)
+    gap = opts.refractory_gate * dead
+    spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
+    bad_pair = _fast_in_spans(events, gap, spans)
+    sat = np.asarray(lin.max(axis=-1) if lin.shape[-1] == 3 else lin[..., 0]).reshape(f, -1) >= opts.saturation
+    out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
+    for c in range(len(names)):
+        sel = np.flatnonzero((chan == c) & ~hot)
+        ref = np.quantile(sens[:, sel], 0.99) if sel.size else 1.0
+        frame_ok = (sens > opts.dark * ref) & ~sat
+        active = np.flatnonzero((between[:, :, sel].sum((0, 1)) > 0) & frame_ok[:, sel].any(0))
+        sel = sel[active]
+        if sel.size < opts.min_pixels:
+            raise InputError("calibrate", "events", f"events on at least {opts.min_pixels} usable pixels of channel "
+                             f"{names[c]} between the frames", f"{sel.size} pixel(s)")
+        if sel.size > opts.max_pixels:
+            sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
+        data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile)
+        res = search_thresholds(data, opts, rng)
+        out_p.append(res["theta_pos"])
+        out_n.append(res["theta_neg"])
+        sd_p.append(res["std_pos"])
+        sd_n.append(res["std_neg"])
+        per.append({k: res[k] for k in ("loss", "pixels", "residuals")})
+    details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
+                    "n_samples": opts.n_samples})
+    return SensorThresholds(names, np.array(out_p), np.array(out_n), np.array(sd_p), np.array(sd_n),
+                            True, "mEDI consistency (ON/OFF per channel, L1)", details)
+
+
+def _fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.ndarray:
+    """``[S, H*W]`` bool: pixel has two events closer than ``gap_us`` inside span ``[a, b)``."""
+    hw = events.height * events.width
+    if gap_us <= 0 or len(spans) == 0:
+        return np.zeros((len(spans), hw), bool)
+    bounds = np.unique(spans.reshape(-1))
+    seg = fast_event_counts(events, gap_us, bounds)  # [len(bounds) - 1, HW]
+    cum = np.concatenate([np.zeros((1, hw), np.int64), np.cumsum(seg, axis=0)])
+    a = np.searchsorted(bounds, spans[:, 0])
+    b = np.searchsorted(bounds, spans[:, 1])
+    return (cum[b] - cum[a]) > 0
+
+
+def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch: int,
+                   opts: CalibrateOptions, rng: np.random.Generator) -> list[dict]:
+    """Per channel ``theta_- / theta_+ = sum N_+ / sum N_-`` with a tile-bootstrap uncertainty."""
+    cm = events.count_maps().reshape(2, -1).astype(np.float64)
+    w = events.width
+    tiles_x = (w + opts.tile - 1) // opts.tile
+    pix = np.arange(cm.shape[1])
+    tid = (pix // w // opts.tile) * tiles_x + (pix % w) // opts.tile
+    out = []
+    for c in range(n_ch):
+        sel = (chan == c) & ~hot
+        on = np.bincount(tid[sel], cm[0, sel], minlength=tid.max() + 1)
+        off = np.bincount(tid[sel], cm[1, sel], minlength=tid.max() + 1)
+        ratio = float(on.sum() / off.sum()) if off.sum() > 0 else float("nan")
+        std = float("nan")
+        if opts.bootstrap > 0 and on.size >= 4 and off.sum() > 0:
+            wts = rng.multinomial(on.size, np.full(on.size, 1.0 / on.size), size=opts.bootstrap)
+            std = float(np.std((wts @ on) / np.maximum(wts @ off, 1.0)))
+        out.append({"ratio": ratio, "std": std})
+    return out
+
+
+def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...], ratio: list[dict],
+                   opts: CalibrateOptions, details: dict) -> SensorThresholds:
+    """One frame: scale from the frame's EDI sharpness; no frame: scale assumed. Ratio from balance."""
+    rho = np.array([r["ratio"] for r in ratio])
+    rho_sd = np.array([r["std"] for r in ratio])
+    if not np.all(np.isfinite(rho) & (rho > 0)):
+        raise InputError("calibrate", "events", "both ON and OFF events on every channel", rho.tolist())
+    if len(frames) == 1:
+        scale = estimate_theta(frames.to_linear()[0], events, float(frames.t_start[0]),
+                               float(frames.t_end[0]))
+        method, known = "single-frame EDI sharpness (scale) + event balance (ON/OFF ratio)", True
+    else:
+        scale = opts.unknown_scale
+        method, known = "event balance (ON/OFF ratio only; common scale assumed)", False
+    tp, tn = scale / np.sqrt(rho), scale * np.sqrt(rho)
+    sd_rel = 0.5 * rho_sd / rho
+    details.update({"assumed_scale": None if known else scale})
+    return SensorThresholds(names, tp, tn, tp * sd_rel, tn * sd_rel, known, method, details)
