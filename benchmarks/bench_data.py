@@ -1,14 +1,25 @@
-"""Data-layer loading speeds: native events.h5 and rpg text, against targets and a baseline.
+"""Data-layer loading speeds: native events.h5 and rpg text, against targets and a baseline; and the
+Prophesee ``.raw`` reader (faery) against the former numpy decoder, in time and peak memory.
 
-Run: ``PYTHONPATH=. python benchmarks/bench_data.py [--n 10000000] [--repeat 3]``. Prints one row
-per case: best-of-``repeat`` seconds, the target, and a reference measured in the same run (plain
-h5py reads without validation; ``np.loadtxt`` timed on 1/20 of the lines and scaled up).
-Cases are a list: add one by appending a :class:`Case`.
+Run: ``PYTHONPATH=. python benchmarks/bench_data.py [--n 10000000] [--repeat 3] [--raw FILE]
+[--no-synthetic]``. Prints one row per case: best-of-``repeat`` seconds, the target, and a reference
+measured in the same run (plain h5py reads without validation; ``np.loadtxt`` timed on 1/20 of the
+lines and scaled up). Cases are a list: add one by appending a :class:`Case`.
+
+The ``.raw`` table (default file: the EVT3 recording of ``../shared/data/real``, when present) runs
+each reader in its own process: best-of-``repeat`` seconds, and the peak resident memory
+(``ru_maxrss``) above the process's level after its imports, next to the size of the returned
+stream's arrays.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
 import tempfile
 import time
 from collections.abc import Callable
@@ -23,6 +34,11 @@ from fusiongs.events.readers.text import read_events_txt, write_events_txt
 from fusiongs.events.stream import EventStream
 
 W, H = 346, 260
+REAL_EVT3 = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "prophesee_evt3_1280x720.raw"
+RAW_READERS = {
+    "faery, chunk by chunk (fusiongs)": "fusiongs.events.readers.prophesee:read_prophesee_raw",
+    "numpy, whole file (former)": "fusiongs.events.readers._evt_reference:read_prophesee_raw_numpy",
+}
 
 
 @dataclass
@@ -121,24 +137,74 @@ def cases(repeat: int) -> list[Case]:
     ]
 
 
+def _raw_child(target: str, path: str, repeat: int) -> None:
+    """In a fresh process: time ``target`` on ``path`` and print its peak memory growth as JSON."""
+    import importlib
+
+    import faery.extension  # noqa: F401  (imports are not decoding: load before the baseline)
+
+    module, name = target.split(":")
+    read = getattr(importlib.import_module(module), name)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        s = read(path)
+        times.append(time.perf_counter() - t0)
+        events, out_bytes = len(s), sum(a.nbytes for a in (s.t, s.x, s.y, s.p))
+        del s
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    print(json.dumps({"seconds": min(times), "peak_kib": peak - before, "events": events,
+                      "out_bytes": out_bytes}))
+
+
+def raw_table(path: Path, repeat: int) -> None:
+    """Print the reader comparison on one ``.raw`` file (one subprocess per reader)."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    print(f"\n{path.name} ({path.stat().st_size / 2**20:.1f} MiB), best of {repeat}, one process per reader")
+    print("| reader | events | seconds | peak RSS above imports | stream arrays |\n|---|---|---|---|---|")
+    for label, target in RAW_READERS.items():
+        res = subprocess.run([sys.executable, __file__, "--child", target, str(path), str(repeat)],
+                             capture_output=True, text=True, check=True,
+                             env=env)
+        r = json.loads(res.stdout.strip().splitlines()[-1])
+        print(f"| {label} | {r['events']:,} | {r['seconds']:.3f} | {r['peak_kib'] / 1024:.1f} MiB | "
+              f"{r['out_bytes'] / 2**20:.1f} MiB |")
+
+
 def main() -> None:
+    if len(sys.argv) == 5 and sys.argv[1] == "--child":
+        _raw_child(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+        return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=10_000_000, help="events per case")
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--raw", type=Path, default=REAL_EVT3,
+                    help="Prophesee .raw file of the reader table (its header must give the size)")
+    ap.add_argument("--no-synthetic", action="store_true", help="only the .raw reader table")
     args = ap.parse_args()
-    stream = synthetic_stream(args.n)
+    if not args.no_synthetic:
+        synthetic_table(args.n, args.repeat)
+    if args.raw.is_file():
+        raw_table(args.raw, args.repeat)
+    else:
+        print(f"\n(no {args.raw}: .raw reader table skipped)")
+
+
+def synthetic_table(n: int, repeat: int) -> None:
+    stream = synthetic_stream(n)
     rows = []
     with tempfile.TemporaryDirectory() as d:
-        for case in cases(args.repeat):
+        for case in cases(repeat):
             state = case.setup(Path(d), stream)
-            seconds = best_of(partial(case.run, state), args.repeat)
+            seconds = best_of(partial(case.run, state), repeat)
             ref = case.reference(state) if case.reference else float("nan")
             size = ""
             p = state[0] if isinstance(state, tuple) else state
             if isinstance(p, Path):
                 size = f"{p.stat().st_size / 2**20:.0f} MiB"
             rows.append((case.name, seconds, case.target_s, ref, case.reference_name, size))
-    print(f"{args.n:,} events, best of {args.repeat}")
+    print(f"{n:,} events, best of {repeat}")
     print("| case | seconds | target | ok | reference | file |\n|---|---|---|---|---|---|")
     for name, s, tgt, ref, ref_name, size in rows:
         ok = "yes" if s <= tgt else "NO"

@@ -105,3 +105,63 @@ def test_corrupt_aedat4_is_an_input_error(tmp_path):
         read_aedat4(tmp_path / "e.aedat4")
     with pytest.raises(InputError, match="no such file"):
         read_aedat4(tmp_path / "missing.aedat4")
+
+
+def test_evt3_events_before_time_and_row_words_are_skipped(tmp_path):
+    words = [0x2000 | 3,                       # no time, no row yet
+             0x8001, 0x3000 | 20, 0x4000 | 0b101,  # time high only: a vector of 2 events, skipped
+             0x6005, 0x2000 | 4,               # time low too, still no row: skipped
+             0x0007, 0x2000 | 5, 0x2800 | 6]   # row 7: these two are decoded
+    (tmp_path / "e.raw").write_bytes(b"% evt 3.0\n% geometry 200x10\n" + np.asarray(words, "<u2").tobytes())
+    s = read_prophesee_raw(tmp_path / "e.raw")
+    assert s.x.tolist() == [5, 6] and s.y.tolist() == [7, 7] and s.p.tolist() == [-1, 1]
+    assert s.t.tolist() == [(1 << 12) | 5] * 2
+
+
+def _random_evt3(rng, n_packets=400) -> tuple[bytes, int]:
+    """A valid EVT 3.0 stream mixing single and vector words, with time wraps; and its event count."""
+    words, n, t, base_t = [], 0, 0, 2**24 - 30_000
+    for _ in range(n_packets):
+        t += int(rng.integers(0, 400))
+        tt = (base_t + t) % 2**24
+        words += [0x8000 | (tt >> 12), 0x6000 | (tt & 0xFFF), int(rng.integers(0, 720))]
+        if rng.random() < 0.5:
+            xs = rng.choice(1280, int(rng.integers(1, 5)), replace=False)
+            words += [0x2000 | (int(rng.random() < 0.5) << 11) | int(x) for x in xs]
+            n += xs.size
+        else:
+            words.append(0x3000 | (int(rng.random() < 0.5) << 11) | int(rng.integers(0, 1200)))
+            for _ in range(int(rng.integers(1, 4))):
+                bits = int(rng.integers(1, 4096))
+                words.append((0x4000 if rng.random() < 0.5 else 0x5000) | bits)
+                n += bin(bits if words[-1] >> 12 == 4 else bits & 0xFF).count("1")
+    return np.asarray(words, "<u2").tobytes(), n
+
+
+def test_evt3_reader_matches_the_numpy_reference_on_mixed_words(tmp_path):
+    from fusiongs.events.readers._evt_reference import read_prophesee_raw_numpy
+
+    data, n = _random_evt3(np.random.default_rng(3))
+    (tmp_path / "e.raw").write_bytes(b"% evt 3.0\n% geometry 2048x720\n" + data)
+    ours, ref = read_prophesee_raw(tmp_path / "e.raw"), read_prophesee_raw_numpy(tmp_path / "e.raw")
+    assert len(ours) == len(ref) == n
+    assert ours.t[-1] > 2**24  # the 24-bit time wrapped and was unwrapped
+    for k in ("t", "x", "y", "p"):
+        assert np.array_equal(getattr(ours, k), getattr(ref, k)), k
+
+
+def test_raw_without_geometry_checks_the_given_size_and_honours_drop_invalid(tmp_path):
+    t, x, y, on = np.arange(4), np.array([1, 900, 2, 3]), np.array([0, 1, 2, 3]), np.ones(4, bool)
+    (tmp_path / "e.raw").write_bytes(b"% evt 2.0\n" + encode_evt2(t, x, y, on))
+    with pytest.raises(InputError, match="inside the 640x480 sensor"):
+        read_prophesee_raw(tmp_path / "e.raw", 640, 480)
+    s = read_prophesee_raw(tmp_path / "e.raw", 640, 480, drop_invalid=True)
+    assert s.x.tolist() == [1, 2, 3] and s.t.tolist() == [0, 2, 3]
+
+
+def test_reader_columns_have_the_stream_dtypes_without_a_copy(tmp_path):
+    t, x, y, on = _events(3000)
+    (tmp_path / "e.raw").write_bytes(b"% evt 2.0\n% geometry 1280x720\n" + encode_evt2(t, x, y, on))
+    s = read_prophesee_raw(tmp_path / "e.raw")
+    assert (s.t.dtype, s.x.dtype, s.y.dtype, s.p.dtype) == (np.int64, np.uint16, np.uint16, np.int8)
+    assert all(a.flags.owndata and a.base is None for a in (s.t, s.x, s.y, s.p))

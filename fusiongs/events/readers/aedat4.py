@@ -1,4 +1,8 @@
-"""iniVation AEDAT4 recordings through the maintained ``aedat`` package (events and APS frames)."""
+"""iniVation AEDAT4 recordings through the maintained ``aedat`` package (events and APS frames).
+
+Event packets are copied into the output columns as they are decoded
+(:func:`~fusiongs.events.readers.chunks.columns_from_chunks`); frames are kept as decoded.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +13,7 @@ import numpy as np
 
 from fusiongs.errors import InputError, MissingDependencyError
 from fusiongs.events.h5 import stream_from_file
+from fusiongs.events.readers.chunks import columns_from_chunks
 from fusiongs.events.stream import EventStream
 
 
@@ -58,7 +63,7 @@ def read_aedat4(path: str | Path, width: int | None = None, height: int | None =
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "file", "an existing AEDAT4 file", "no such file")
-    chunks, frames = [], []
+    frames: list[dict] = []
     try:
         decoder = aedat.Decoder(str(path))
         streams = decoder.id_to_stream()
@@ -68,23 +73,25 @@ def read_aedat4(path: str | Path, width: int | None = None, height: int | None =
             raise InputError(path, "streams", "an 'events' stream",
                              f"streams {sorted(v.get('type') for v in streams.values())}")
         ev_id, fr_id = ev_ids[0], (fr_ids[0] if fr_ids else None)
-        for packet in decoder:
-            sid = packet.get("stream_id")
-            if sid == ev_id and "events" in packet:
-                chunks.append(packet["events"])
-            elif sid == fr_id and "frame" in packet:
-                frames.append(packet["frame"])
+        t, x, y, p = columns_from_chunks(_event_packets(decoder, ev_id, fr_id, frames))
     except InputError:
         raise
     except Exception as e:  # the Rust decoder raises plain RuntimeError/OSError on corrupt input
         raise InputError(path, "file", "a readable AEDAT4 file (truncated or corrupt?)", str(e)) from None
     width = width if width is not None else int(streams[ev_id]["width"])
     height = height if height is not None else int(streams[ev_id]["height"])
-    ev = np.concatenate(chunks) if chunks else np.zeros(0, [("t", "<u8"), ("x", "<u2"),
-                                                          ("y", "<u2"), ("on", "?")])
-    stream = stream_from_file(path, ev["t"], ev["x"], ev["y"], ev["on"], width, height, cfa, sort,
-                              drop_invalid)
+    stream = stream_from_file(path, t, x, y, p, width, height, cfa, sort, drop_invalid)
     return stream, _frames(frames)
+
+
+def _event_packets(decoder, ev_id: int, fr_id: int | None, frames: list[dict]):
+    """Yield the event packets of stream ``ev_id``; append the frames of ``fr_id`` to ``frames``."""
+    for packet in decoder:
+        sid = packet.get("stream_id")
+        if sid == ev_id and "events" in packet:
+            yield packet["events"]
+        elif sid == fr_id and "frame" in packet:
+            frames.append(packet["frame"])
 
 
 def _frames(frames: list[dict]) -> ApsFrames:

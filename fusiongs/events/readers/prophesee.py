@@ -1,20 +1,19 @@
-"""Prophesee ``.raw`` recordings: EVT 2.0 and EVT 3.0 decoders, vectorised with numpy.
+"""Prophesee ``.raw`` recordings (EVT 2.0 and EVT 3.0), decoded by the maintained ``faery`` package.
+
+``faery`` (Rust) streams the file in packets of a few thousand events; each packet is copied into
+the output columns as it comes (:func:`~fusiongs.events.readers.chunks.columns_from_chunks`), so
+the memory beyond the returned stream is one packet. fusiongs parses the ``%`` header itself (size,
+version, clear errors) and checks the word stream's length.
 
 Formats as published by Prophesee (docs.prophesee.ai, "EVT 2.0 Format" / "EVT 3.0 Format"); all
-words little-endian, the word type in the 4 most significant bits.
-
-EVT 2.0, 32-bit words: CD_OFF 0x0 / CD_ON 0x1 carry ``ts[27:22]`` (6 time LSBs), ``x[21:11]``,
-``y[10:0]``; EV_TIME_HIGH 0x8 carries the 28 time MSBs in ``[27:0]``, so ``t = high << 6 | lsb``;
-EXT_TRIGGER 0xA, OTHERS 0xE and CONTINUED 0xF carry no CD events.
-
-EVT 3.0, 16-bit words (decoding keeps a state): EVT_ADDR_Y 0x0 sets ``y = w[10:0]``; EVT_ADDR_X
-0x2 emits one event at ``x = w[10:0]`` with polarity ``w[11]``; VECT_BASE_X 0x3 sets a base ``x``
-and polarity; VECT_12 0x4 / VECT_8 0x5 emit an event at ``base + i`` for every set bit ``i`` of
-their 12/8 valid bits, then advance the base by 12/8; EVT_TIME_LOW 0x6 and EVT_TIME_HIGH 0x8 set
-the low and high 12 bits of a 24-bit µs time that wraps (every 16.8 s; a decreasing high part
-marks a wrap); EXT_TRIGGER 0xA, OTHERS 0xE, CONTINUED_4 0x7 and CONTINUED_12 0xF carry no CD events.
-Events before the first EVT_TIME_HIGH (EVT 2.0) or before the first time and row words (EVT 3.0)
-have no defined time/row and are skipped, as Prophesee's decoders do.
+words little-endian, the word type in the 4 most significant bits. EVT 2.0: 32-bit words, CD_OFF
+0x0 / CD_ON 0x1 one event each, EV_TIME_HIGH 0x8 the 28 time MSBs. EVT 3.0: 16-bit words with a
+decoder state: EVT_ADDR_Y 0x0 (row), EVT_ADDR_X 0x2 (one event), VECT_BASE_X 0x3, VECT_12 0x4 /
+VECT_8 0x5 (one event per set bit), EVT_TIME_LOW 0x6 / EVT_TIME_HIGH 0x8 (a 24-bit µs time that
+wraps every 16.8 s; ``faery`` unwraps it).
+Events before the first EVT_TIME_HIGH (EVT 2.0) or before the first time-high, time-low and row
+words (EVT 3.0) have no defined time/row: ``faery`` emits them at time 0 / row 0, fusiongs skips
+them, as Prophesee's decoders do (:func:`undefined_prefix_events`).
 """
 
 from __future__ import annotations
@@ -23,8 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from fusiongs.errors import InputError
+from fusiongs.errors import InputError, MissingDependencyError
 from fusiongs.events.h5 import stream_from_file
+from fusiongs.events.readers.chunks import columns_from_chunks
 from fusiongs.events.stream import EventStream
 
 
@@ -75,92 +75,80 @@ def raw_version_and_size(fields: dict[str, str], path) -> tuple[str, int | None,
     return version, width, height
 
 
-def decode_evt2(words: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Decode EVT 2.0 words.
+WORD_BYTES = {"2.0": 4, "3.0": 2}
+MAX_COORD = 2048  # EVT 2.0 / 3.0 addresses are 11 bits
+_SCAN_WORDS = 1 << 16
+
+
+def undefined_prefix_events(path: str | Path, offset: int, version: str) -> int:
+    """Count the events encoded before the decoder state is defined.
+
+    That is before the first EV_TIME_HIGH word (EVT 2.0), or before the first EVT_TIME_HIGH,
+    EVT_TIME_LOW and EVT_ADDR_Y words have all been seen (EVT 3.0; a vector word counts its set
+    valid bits). Reads the file in blocks of ``_SCAN_WORDS`` words until the state is defined
+    (usually the first word).
 
     Args:
-        words: ``[N]`` uint32 words.
+        path: the ``.raw`` file; ``offset``: byte offset of the first word; ``version``: ``"2.0"``
+            or ``"3.0"``.
 
     Returns:
-        ``(t, x, y, on)``: ``[E]`` int64 µs, int64 column, int64 row and bool ON.
+        The number of leading events a stateless decoder emits with undefined time or row.
     """
-    kind = words >> 28
-    is_high = kind == 0x8
-    seen_high = np.cumsum(is_high) > 0
-    hi_idx = np.where(is_high, np.arange(words.size), -1)
-    np.maximum.accumulate(hi_idx, out=hi_idx)
-    cd = ((kind == 0x0) | (kind == 0x1)) & seen_high
-    w = words[cd].astype(np.int64)
-    high = (words[hi_idx[cd]].astype(np.int64) & 0x0FFFFFFF)
-    t = (high << 6) | ((w >> 22) & 0x3F)
-    return t, (w >> 11) & 0x7FF, w & 0x7FF, (w >> 28) == 1
+    dtype = "<u4" if version == "2.0" else "<u2"
+    shift = 28 if version == "2.0" else 12
+    needed = {0x8} if version == "2.0" else {0x8, 0x6, 0x0}
+    count = 0
+    with open(path, "rb") as fh:
+        fh.seek(offset)
+        while needed:
+            words = np.fromfile(fh, dtype=dtype, count=_SCAN_WORDS)
+            if words.size == 0:
+                break
+            kind = words >> shift
+            firsts = {k: np.flatnonzero(kind == k) for k in needed}
+            end = words.size if any(f.size == 0 for f in firsts.values()) else \
+                max(int(f[0]) for f in firsts.values())
+            needed = {k for k, f in firsts.items() if f.size == 0}
+            count += _events_in(words[:end], kind[:end], version)
+    return count
 
 
-def _ffill_index(mask: np.ndarray) -> np.ndarray:
-    """For every position, the index of the last position ``<=`` it where ``mask`` holds (-1: none)."""
-    idx = np.where(mask, np.arange(mask.size), -1)
-    np.maximum.accumulate(idx, out=idx)
-    return idx
+def _events_in(words: np.ndarray, kind: np.ndarray, version: str) -> int:
+    """Number of CD events the words encode (EVT 3.0 vectors: their set valid bits)."""
+    if version == "2.0":
+        return int(np.count_nonzero(kind <= 0x1))
+    n = int(np.count_nonzero(kind == 0x2))
+    for k, nbits in ((0x4, 12), (0x5, 8)):
+        bits = (words[kind == k, None].astype(np.int64) >> np.arange(nbits)) & 1
+        n += int(bits.sum())
+    return n
 
 
-def decode_evt3(words: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Decode EVT 3.0 words (see the module docstring for the state machine).
+def _faery_chunks(path: Path, version: str, header_size: tuple[int, int] | None):
+    """Event packets of ``path`` from faery's EVT decoder; its errors become :class:`InputError`.
 
-    Args:
-        words: ``[N]`` uint16 words.
-
-    Returns:
-        ``(t, x, y, on)``: ``[E]`` int64 µs, int64 column, int64 row and bool ON, in stream order.
+    ``header_size``: ``(width, height)`` of the header, which faery checks every address against;
+    ``None`` when the header has none (faery then checks the 11-bit range only, and fusiongs the
+    user's size in :meth:`EventStream.create`, honouring ``drop_invalid``).
     """
-    w = words.astype(np.int64)
-    kind = w >> 12
-    n = w.size
-    # time: high part with wrap-around count, low part; both held until replaced
-    is_hi, is_lo = kind == 0x8, kind == 0x6
-    hi_vals = w[is_hi] & 0xFFF
-    wraps = np.concatenate([[0], np.cumsum(np.diff(hi_vals) < 0)]) if hi_vals.size else hi_vals
-    hi_full = np.zeros(n, np.int64)
-    hi_full[is_hi] = ((wraps << 12) + hi_vals) << 12
-    hi_at = _ffill_index(is_hi)
-    lo_at = _ffill_index(is_lo)
-    y_at = _ffill_index(kind == 0x0)
-    valid_state = (hi_at >= 0) & (lo_at >= 0) & (y_at >= 0)
-    time = hi_full[np.maximum(hi_at, 0)] + (w[np.maximum(lo_at, 0)] & 0xFFF)
-    row = w[np.maximum(y_at, 0)] & 0x7FF
-    # single events
-    single = (kind == 0x2) & valid_state
-    # vector events: base x and polarity from the last VECT_BASE_X, advanced by 12/8 per vector word
-    is_base = kind == 0x3
-    step = np.where(kind == 0x4, 12, np.where(kind == 0x5, 8, 0))
-    cum = np.cumsum(step) - step  # steps of vector words strictly before each position
-    base_at = _ffill_index(is_base)
-    vec = ((kind == 0x4) | (kind == 0x5)) & valid_state & (base_at >= 0)
-    vi = np.flatnonzero(vec)
-    vbase = w[base_at[vi]]
-    vx0 = (vbase & 0x7FF) + cum[vi] - cum[base_at[vi]]
-    nbits = np.where(kind[vi] == 0x4, 12, 8)
-    bits = (w[vi, None] >> np.arange(12)) & 1
-    bits[nbits == 8, 8:] = 0
-    # place events in stream order: per-word counts, then scatter
-    si = np.flatnonzero(single)
-    counts = np.zeros(n, np.int64)
-    counts[si] = 1
-    counts[vi] = bits.sum(axis=1)
-    start = np.cumsum(counts) - counts
-    total = int(counts.sum())
-    t = np.empty(total, np.int64)
-    x = np.empty(total, np.int64)
-    y = np.empty(total, np.int64)
-    on = np.empty(total, bool)
-    pos = start[si]
-    t[pos], y[pos], x[pos], on[pos] = time[si], row[si], w[si] & 0x7FF, ((w[si] >> 11) & 1) == 1
-    r, c = np.nonzero(bits)
-    rank = np.cumsum(bits, axis=1)[r, c] - 1
-    pos = start[vi[r]] + rank
-    t[pos], y[pos] = time[vi[r]], row[vi[r]]
-    x[pos] = vx0[r] + c
-    on[pos] = ((vbase[r] >> 11) & 1) == 1
-    return t, x, y, on
+    try:
+        from faery.extension import evt
+    except ImportError:
+        raise MissingDependencyError("faery", "reading Prophesee .raw files") from None
+    fallback = header_size or (MAX_COORD, MAX_COORD)
+    try:
+        with evt.Decoder(str(path), fallback, "evt2" if version == "2.0" else "evt3") as decoder:
+            for packet in decoder:
+                if "events" in packet:
+                    yield packet["events"]
+    except RuntimeError as e:  # the Rust decoder raises plain RuntimeError on bad input
+        msg = str(e)
+        if "overflow" in msg and header_size is not None:
+            w, h = header_size
+            raise InputError(path, "x/y", f"coordinates inside the {w}x{h} sensor of the header",
+                             msg) from None
+        raise InputError(path, "data", f"a valid EVT {version} word stream", msg) from None
 
 
 def read_prophesee_raw(path: str | Path, width: int | None = None, height: int | None = None,
@@ -190,15 +178,16 @@ def read_prophesee_raw(path: str | Path, width: int | None = None, height: int |
     if width is None or height is None:
         raise InputError(path, "geometry", "the sensor size in the header or --width/--height",
                          "no '% geometry' header line")
-    data = np.fromfile(path, dtype=np.uint8, offset=offset)
-    size = {"2.0": 4, "3.0": 2}.get(version)
+    size = WORD_BYTES.get(version)
     if size is None:
         raise InputError(path, "evt", "EVT 2.0 or EVT 3.0 (EVT 2.1 is not supported)", version)
-    if data.size % size:
+    n_bytes = path.stat().st_size - offset
+    if n_bytes % size:
         raise InputError(path, "data", f"a whole number of {size}-byte EVT {version} words "
-                         "(truncated file?)", f"{data.size} bytes")
-    if version == "2.0":
-        t, x, y, on = decode_evt2(data.view("<u4"))
-    else:
-        t, x, y, on = decode_evt3(data.view("<u2"))
-    return stream_from_file(path, t, x, y, on, width, height, cfa, sort, drop_invalid)
+                         "(truncated file?)", f"{n_bytes} bytes")
+    skip = undefined_prefix_events(path, offset, version)
+    # every EVT 2.0 CD word is one event: the word count bounds the output; EVT 3.0 usually spends
+    # more than one word per event (columns grow when vector words pack more)
+    chunks = _faery_chunks(path, version, (hw, hh) if hw is not None and hh is not None else None)
+    t, x, y, p = columns_from_chunks(chunks, capacity=n_bytes // size, skip=skip)
+    return stream_from_file(path, t, x, y, p, width, height, cfa, sort, drop_invalid)
