@@ -87,6 +87,13 @@ def test_render_command_renders_requested_instants(tiny_run, tmp_path):
     assert a.shape == b.shape and not np.array_equal(a, b)
 
 
+def test_render_outside_the_recording_is_one_line_and_exit_2(tiny_run, tmp_path, capsys):
+    assert main(["render", str(tiny_run), "--t", "0.03", "5", "-o", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--t" in err[0] and "got 5" in err[0] and "recording's range [" in err[0]
+    assert not list(tmp_path.glob("t_*.png"))
+
+
 def test_eval_command_reads_run_and_truth(tiny_scene, tiny_run, capsys):
     assert main(["eval", str(tiny_run), "--gt", str(tiny_scene / "gt")]) == 0
     out = capsys.readouterr().out

@@ -1,0 +1,20 @@
+"""``fusiongs render``: instants outside the recording are refused, not clamped."""
+
+from __future__ import annotations
+
+import pytest
+
+from fusiongs.commands.render import check_instants
+from fusiongs.errors import InputError
+
+
+def test_instants_inside_the_range_pass():
+    check_instants([0.0, 0.05, 0.12], 0.0, 0.12)
+
+
+@pytest.mark.parametrize("bad", [-0.01, 0.1201, 7.5, float("nan"), float("inf")])
+def test_instants_outside_the_range_name_the_flag_value_and_range(bad):
+    with pytest.raises(InputError) as e:
+        check_instants([0.05, bad], 0.0, 0.12)
+    msg = str(e.value)
+    assert "--t" in msg and f"{bad:g}" in msg and "[0, 0.12] s" in msg
