@@ -87,6 +87,11 @@ def _camera(d: dict, where: str) -> PinholeCamera:
             raise InputError(where, "camera.distortion", "5 finite numbers [k1, k2, p1, p2, k3]",
                              repr(dist))
         dist = tuple(float(v) for v in dist)
+        if any(v != 0.0 for v in dist):
+            raise InputError(where, "camera.distortion", "no lens distortion (absent or all zero): "
+                             "distortion coefficients are not supported yet, undistort the frames and "
+                             "events first (OpenCV undistort / undistortPoints) and remove the key",
+                             repr(list(dist)))
     return PinholeCamera(size["width"], size["height"], vals["fx"], vals["fy"], vals["cx"],
                          vals["cy"], dist)
 
@@ -102,7 +107,8 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
         InputError: on a wrong ``format``/``version``, a missing required key (``format``,
             ``version``, ``camera``, the camera's numbers, ``events.path``, ``frames[i].path``,
             ``t_start``, ``t_end``, ``renders[i].name``/``t``), a wrong type, ``t_end <= t_start``,
-            an unknown CFA or response, or duplicate render names.
+            an unknown CFA or response, duplicate render names, or a non-zero lens distortion
+            (not supported yet: frames and events must be undistorted first).
     """
     d = _obj(doc, where, "(top level)")
     if d.get("format") != SCENE_FORMAT:

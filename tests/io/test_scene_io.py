@@ -32,7 +32,7 @@ def _scene(channels=3, cfa="RGGB", bits=8) -> Scene:
     c2w = np.tile(np.eye(4), (3, 1, 1))
     c2w[:, 0, 3] = [0.0, 0.1, 0.2]
     poses = PoseSamples(np.array([0.0, 0.05, 0.1]), c2w)
-    cam = PinholeCamera(W, H, 10.0, 11.0, 6.0, 4.0, (0.1, 0.0, 0.0, 0.0, 0.01))
+    cam = PinholeCamera(W, H, 10.0, 11.0, 6.0, 4.0, (0.0,) * 5)  # non-zero: refused on load
     return Scene(cam, ev, fs, poses, (RenderRequest("deblur_0", 0.02), RenderRequest("novel", 0.09)))
 
 
