@@ -139,7 +139,8 @@ def read_calibration(path: str | Path) -> tuple[SensorThresholds, dict]:
     try:
         doc = json.loads(p.read_text())
     except FileNotFoundError:
-        raise InputError(p, "file", "an existing calibration.json (from fusiongs calibrate)", "not found") from None
+        raise InputError(p, "file", "an existing calibration.json (from fusiongs calibrate)",
+                         "not found") from None
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
         raise InputError(p, "file", "a JSON calibration file", f"{type(e).__name__}: {e}") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT_NAME:

@@ -1,0 +1,189 @@
+"""The threshold estimator of ``fusiongs calibrate`` and the command itself."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fusiongs.cli import main
+from fusiongs.errors import InputError
+from fusiongs.eval.calibrate import CalibrateOptions, dead_time_us, estimate_thresholds, hot_pixels
+from fusiongs.events.stream import EventStream
+from fusiongs.events.thresholds import SensorThresholds, read_calibration, write_calibration
+from fusiongs.frames.frameset import FrameSet
+from fusiongs.io.scene import Scene
+from fusiongs.sim.dvs import DVSParams
+from fusiongs.sim.simulate import SimConfig, run_simulation
+from fusiongs.sim.write import write_simulated_scene
+
+
+def _small(cfa, on, off, seed=1, **dvs):
+    params = dict(theta_on=on, theta_off=off, theta_sigma=0.02, refractory_s=2e-4, ba_rate_hz=0.5)
+    params.update(dvs)
+    cfg = SimConfig(preset="wall", width=80, height=60, duration=0.5, frames=6, exposure=0.04, cfa=cfa,
+                    dvs_rate_hz=1000.0, blur_samples=8, supersample=1, novel=0, seed=seed,
+                    dvs=DVSParams(**params))
+    return run_simulation(cfg)
+
+
+@pytest.fixture(scope="module")
+def grey_asym():
+    return _small(None, 0.2, 0.35)
+
+
+@pytest.fixture(scope="module")
+def rggb_asym():
+    return _small("RGGB", 0.4, 0.25, seed=2)
+
+
+@pytest.fixture(scope="module")
+def grey_dir(tmp_path_factory, grey_asym):
+    root = tmp_path_factory.mktemp("calib") / "scene"
+    write_simulated_scene(grey_asym.scene, grey_asym.gt, root, stats=grey_asym.stats)
+    return root
+
+
+def _rel(est, true):
+    return np.abs(np.asarray(est) / true - 1.0)
+
+
+# Small scenes (80x60, 6 frames) hold ~25x fewer residuals than a 173x130, 12-frame one: 15 % here.
+@pytest.mark.parametrize("case", ["grey_asym", "rggb_asym"])
+def test_on_and_off_thresholds_are_recovered_separately(case, request):
+    res = request.getfixturevalue(case)
+    th = estimate_thresholds(res.scene.frames, res.scene.events)
+    on, off = res.stats["theta_on"], res.stats["theta_off"]
+    assert th.channels == (("grey",) if res.scene.events.cfa is None else ("R", "G", "B"))
+    assert np.all(_rel(th.theta_pos, on) < 0.15), th.theta_pos
+    assert np.all(_rel(th.theta_neg, off) < 0.15), th.theta_neg
+    # The ratio is what a symmetric estimate cannot give: it must lean the right way.
+    assert np.all((th.theta_neg > th.theta_pos) == (off > on))
+    assert np.all(np.isfinite(th.std_pos)) and np.all(th.std_pos > 0)
+    assert th.scale_known
+
+
+def test_without_frames_only_the_ratio_is_measured(grey_asym):
+    ev = grey_asym.scene.events
+    th = estimate_thresholds(FrameSet.empty(ev.height, ev.width), ev, CalibrateOptions(unknown_scale=0.3))
+    assert not th.scale_known and "ratio" in th.method
+    assert np.isclose(np.sqrt(th.theta_pos * th.theta_neg), 0.3).all()  # the assumed scale
+    ratio = th.theta_neg / th.theta_pos
+    assert abs(ratio[0] / (0.35 / 0.2) - 1) < 0.25, ratio
+
+
+def test_one_frame_gives_a_scale_from_sharpness(grey_asym):
+    fs = grey_asym.scene.frames
+    one = FrameSet(fs.images[:1], fs.t_start[:1], fs.t_end[:1], fs.names[:1], fs.response)
+    th = estimate_thresholds(one, grey_asym.scene.events)
+    assert th.scale_known and "single-frame" in th.method
+    assert 0.05 < th.pair()[0] < 1.0
+
+
+def test_no_events_is_a_named_error(grey_asym):
+    ev = grey_asym.scene.events
+    with pytest.raises(InputError, match="events"):
+        estimate_thresholds(grey_asym.scene.frames, EventStream.empty(ev.width, ev.height))
+
+
+def test_dead_time_is_the_floor_of_the_interval_histogram():
+    rng = np.random.default_rng(0)
+    # 200 pixels firing bursts with intervals >= 500 µs, plus sparse noise at any interval.
+    t = np.concatenate([np.cumsum(500 + rng.exponential(300, 400)) for _ in range(200)])
+    pix = np.repeat(np.arange(200), 400)
+    noise_t = rng.uniform(0, t.max(), 2000)
+    noise_p = rng.integers(0, 200, 2000)
+    tt, pp = np.concatenate([t, noise_t]), np.concatenate([pix, noise_p])
+    order = np.argsort(tt, kind="stable")
+    ev = EventStream.create(np.rint(tt[order]), pp[order] % 20, pp[order] // 20, np.ones(tt.size), 20, 10)
+    assert 420 <= dead_time_us(ev) <= 500
+    flat = np.sort(rng.uniform(0, 1e6, 20000))
+    ev0 = EventStream.create(np.rint(flat), rng.integers(0, 20, flat.size), rng.integers(0, 10, flat.size),
+                             np.ones(flat.size), 20, 10)
+    assert dead_time_us(ev0) < 100  # Poisson intervals: no refractory floor to find
+
+
+def test_hot_pixels_are_spatial_outliers(grey_asym):
+    ev = grey_asym.scene.events
+    hot = hot_pixels(ev)
+    assert hot.sum() < 0.002 * hot.size  # a clean sensor has (almost) none
+    extra_t = np.linspace(ev.t[0], ev.t[-1], 3000).astype(np.int64)
+    t = np.concatenate([ev.t, extra_t])
+    x = np.concatenate([ev.x, np.full(3000, 7)])
+    y = np.concatenate([ev.y, np.full(3000, 5)])
+    p = np.concatenate([ev.p, np.ones(3000, np.int8)])
+    o = np.argsort(t, kind="stable")
+    ev2 = EventStream.create(t[o], x[o], y[o], p[o], ev.width, ev.height)
+    assert hot_pixels(ev2).reshape(ev.height, ev.width)[5, 7]
+
+
+def test_calibration_file_round_trip_and_errors(tmp_path):
+    th = SensorThresholds(("R", "G", "B"), np.array([0.2, 0.3, 0.4]), np.array([0.25, 0.35, 0.45]),
+                          np.full(3, 0.01), np.full(3, np.nan), True, "test")
+    path = write_calibration(tmp_path / "c.json", th, scene="x")
+    back, doc = read_calibration(path)
+    np.testing.assert_allclose(back.as_array(), th.as_array())
+    assert np.isnan(back.std_neg).all() and doc["scene"] == "x"
+    (tmp_path / "bad.json").write_text(json.dumps({"format": "fusiongs-calibration", "thresholds": {
+        "channels": ["grey"], "theta_pos": [0.2], "theta_neg": [-1]}}))
+    with pytest.raises(InputError, match="theta_neg"):
+        read_calibration(tmp_path / "bad.json")
+    (tmp_path / "other.json").write_text("{}")
+    with pytest.raises(InputError, match="format"):
+        read_calibration(tmp_path / "other.json")
+    with pytest.raises(InputError, match="grey"):
+        th.for_sensor(None)
+
+
+def test_cli_writes_calibration_and_prints_json(grey_dir, tmp_path, capsys):
+    out = tmp_path / "c.json"
+    assert main(["calibrate", str(grey_dir), "-o", str(out), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    th = doc["thresholds"]
+    assert th["channels"] == ["grey"] and len(th["theta_pos"]) == 1 and len(th["theta_neg"]) == 1
+    assert doc["truth"]["theta_pos"] == [pytest.approx(0.2)]
+    assert read_calibration(out)[0].theta_pos[0] == pytest.approx(th["theta_pos"][0])
+    assert main(["calibrate", str(grey_dir), "-o", str(tmp_path / "d")]) == 0
+    text = capsys.readouterr().out
+    assert "theta_on" in text and "err on" in text and (tmp_path / "d" / "calibration.json").is_file()
+
+
+def test_edi_accepts_the_calibration_file(grey_dir, tmp_path):
+    cal = tmp_path / "c.json"
+    write_calibration(cal, SensorThresholds.uniform(0.2, 0.35, None))
+    assert main(["edi", str(grey_dir), "-o", str(tmp_path / "a"), "--calibration", str(cal)]) == 0
+    assert main(["edi", str(grey_dir), "-o", str(tmp_path / "b"), "--theta", "0.2", "0.35"]) == 0
+    for f in sorted((tmp_path / "a").glob("*.png")):
+        assert f.read_bytes() == (tmp_path / "b" / f.name).read_bytes()
+
+
+def _scene_dir(tmp_path: Path, scene: Scene, name: str) -> Path:
+    import dataclasses
+
+    root = tmp_path / name
+    write_simulated_scene(dataclasses.replace(scene, renders=()), {}, root)
+    return root
+
+
+def test_cli_bad_input_is_one_line_exit_2(grey_asym, tmp_path, capsys):
+    import dataclasses
+
+    sc = grey_asym.scene
+    no_events = dataclasses.replace(sc, events=EventStream.empty(sc.camera.width, sc.camera.height))
+    fs = sc.frames
+    one = dataclasses.replace(sc, frames=FrameSet(fs.images[:1], fs.t_start[:1], fs.t_end[:1],
+                                                  fs.names[:1], fs.response))
+    no_frames = dataclasses.replace(sc, frames=FrameSet.empty(sc.camera.height, sc.camera.width))
+    d = _scene_dir(tmp_path, no_events, "noev")
+    code = main(["calibrate", str(d), "-o", str(tmp_path / "x.json")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "events" in err and len(err.splitlines()) == 1
+    assert main(["calibrate", str(_scene_dir(tmp_path, one, "one")), "-o", str(tmp_path / "o.json")]) == 0
+    assert "single-frame" in read_calibration(tmp_path / "o.json")[0].method
+    nof = _scene_dir(tmp_path, no_frames, "nof")
+    assert main(["calibrate", str(nof), "-o", str(tmp_path / "n.json")]) == 0
+    captured = capsys.readouterr()
+    assert "common scale" in captured.err
+    assert not read_calibration(tmp_path / "n.json")[0].scale_known
