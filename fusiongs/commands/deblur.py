@@ -9,9 +9,10 @@ HELP = "fit a 3DGS scene and trajectory to blurry frames and events; write sharp
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene folder (scene.json; see FORMAT.md)")
-    p.add_argument("-o", "--out", required=True, help="output folder")
+    p.add_argument("-o", "--output", "--out", dest="out", required=True, help="output folder")
     p.add_argument("--config", default=None,
-                   help="YAML config (default: built-in defaults = configs/deblur.yaml)")
+                   help="YAML config: a path or a preset name (deblur, deblur_fast, deblur_quality, "
+                        "event_only); default: the built-in defaults = deblur")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--calibration", default=None, metavar="FILE",
                    help="calibration.json from `fusiongs calibrate` (default: estimate the same way)")

@@ -8,7 +8,8 @@ HELP = "simulate a small blurry scene with events, deblur it, and print the comp
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("-o", "--out", default="fusiongs-demo", help="output folder (scene/ and run/)")
+    p.add_argument("-o", "--output", "--out", dest="out", default="fusiongs-demo",
+                   help="output folder (scene/ and run/)")
     p.add_argument("--preset", default="boxes", help="simulator preset")
     p.add_argument("--cfa", default=None, help="Bayer pattern of a colour event sensor (e.g. RGGB)")
     p.add_argument("--seed", type=int, default=0)

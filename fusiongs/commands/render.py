@@ -15,7 +15,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="output folder of `fusiongs deblur` (holds checkpoint.pt)")
     p.add_argument("--t", type=float, nargs="+", required=True,
                    help="instants in seconds, inside the recording's time range")
-    p.add_argument("-o", "--out", default=None, help="folder for the PNGs (default RUN/renders_t)")
+    p.add_argument("-o", "--output", "--out", dest="out", default=None,
+                   help="folder for the PNGs (default RUN/renders_t)")
 
 
 def check_instants(times: Sequence[float], t_min: float, t_max: float, where: str = "--t") -> None:

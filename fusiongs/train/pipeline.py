@@ -23,8 +23,12 @@ EVENT_ONLY_NOTE = ("event-only reconstruction: events fix log-intensity changes,
 
 
 def resolve_config(config: str | Path | None, overrides: Sequence[str]) -> DeblurConfig:
-    """The dataclass defaults (= configs/deblur.yaml), then the file, then ``key=value`` overrides."""
-    return load_config(DeblurConfig, config, overrides)
+    """The dataclass defaults (= configs/deblur.yaml), then the file (a path, or the name of a
+    preset shipped in the package such as ``deblur_fast``), then ``key=value`` overrides."""
+    from fusiongs.configs import resolve_config_path
+
+    return load_config(DeblurConfig, resolve_config_path(config) if config is not None else None,
+                       overrides)
 
 
 def baseline_images(scene: Scene, thresholds=None) -> dict[str, dict[str, np.ndarray]]:
