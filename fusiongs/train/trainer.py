@@ -47,6 +47,8 @@ class History:
     theta_pos: list[list[float]] = field(default_factory=list)
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
+    event_weight: list[float] = field(default_factory=list)  # λ_ev (α in event-only mode)
+    psnr_input: list[float] = field(default_factory=list)    # running PSNR of re-rendered blurry frames
     step_seconds: list[float] = field(default_factory=list)  # wall time of each iteration
     seconds: float = 0.0
     render_seconds: float = 0.0      # rasteriser forward passes
@@ -190,6 +192,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     def save() -> None:
         history.seconds = seconds_before + time.perf_counter() - t_begin
         save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+        write_history(history, out_dir / "history.jsonl")
 
     try:
         for it in bar:
@@ -208,11 +211,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if cfg.densify.enabled:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
-            _record(history, it, float(loss.detach()), res.parts, state)
             history.step_seconds.append(time.perf_counter() - t_step)
             if "psnr" in res.parts:  # running mean of the blurry-frame PSNR (re-rendered input)
                 p = res.parts["psnr"]
                 psnr_now = p if math.isnan(psnr_now) else 0.9 * psnr_now + 0.1 * p
+            _record(history, it, float(loss.detach()), res.parts, state, lam_ev, psnr_now)
             bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
@@ -317,8 +320,11 @@ def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int
         opt.zero_grad(set_to_none=True)
 
 
-def _record(h: History, it: int, loss: float, parts: dict[str, float], state: FusionState) -> None:
+def _record(h: History, it: int, loss: float, parts: dict[str, float], state: FusionState,
+            event_weight: float = math.nan, psnr_input: float = math.nan) -> None:
     h.iteration.append(it)
+    h.event_weight.append(float(event_weight))
+    h.psnr_input.append(float(psnr_input))
     h.loss.append(loss)
     h.blur.append(parts.get("blur", math.nan))
     h.event.append(parts.get("event", math.nan))
@@ -328,6 +334,42 @@ def _record(h: History, it: int, loss: float, parts: dict[str, float], state: Fu
     h.theta_pos.append([float(v) for v in tp.reshape(-1)])
     h.theta_neg.append([float(v) for v in tn.reshape(-1)])
     h.n_gaussians.append(state.model.n)
+
+
+HISTORY_KEYS = ("iteration", "loss", "blur", "event", "edi", "event_weight", "theta_pos", "theta_neg",
+                "n_gaussians", "psnr_input", "step_seconds")
+
+
+def history_rows(h: History) -> list[dict]:
+    """One plain dict per recorded iteration: total loss, each term (NaN when off), the event weight
+    (λ_ev, or α in event-only mode), θ per polarity and channel, the number of Gaussians, the
+    running PSNR of the re-rendered blurry frames and the step time."""
+    n = len(h.iteration)
+    rows = []
+    for i in range(n):
+        row = {}
+        for k in HISTORY_KEYS:
+            v = getattr(h, k)
+            row[k] = v[i] if i < len(v) else None
+        rows.append(row)
+    return rows
+
+
+def write_history(h: History, path: Path) -> None:
+    """``history.jsonl`` (one JSON object per recorded iteration; NaN written as null), atomically."""
+    import json
+
+    from fusiongs.atomic import write_text
+
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    lines = [json.dumps({k: clean(v) for k, v in row.items()}) for row in history_rows(h)]
+    write_text(path, "\n".join(lines) + ("\n" if lines else ""))
 
 
 def as_numpy_images(x: torch.Tensor) -> np.ndarray:

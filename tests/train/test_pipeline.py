@@ -60,6 +60,10 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     metrics = json.loads((tiny_run / "metrics.json").read_text())
     # a simulated scene knows its true thresholds: EDI with them is printed beside EDI estimated
     assert set(metrics["mean"]["deblur"]) == {"fusiongs", "blurry", "edi", "edi_true_theta"}
+    rows = [json.loads(line) for line in (tiny_run / "history.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == list(range(10))
+    assert all(r["loss"] is not None and r["n_gaussians"] > 0 and len(r["theta_pos"]) == 1 for r in rows)
+    assert {"blur", "event", "event_weight", "psnr_input"} <= set(rows[0])
     calib = json.loads((tiny_run / "calibration.json").read_text())
     assert calib["format"] == "fusiongs-calibration" and calib["thresholds"]["channels"] == ["grey"]
     assert "novel" in metrics["mean"]
