@@ -82,9 +82,16 @@ def _events_in_windows(t, s, e) -> int:
 
 
 def _read_scene(path, args):
+    """Events, frame windows (µs) and trajectory of a scene folder, with the checks of
+    ``load_scene`` that need no decoded pixels (frame headers, time ranges)."""
     from fusiongs.errors import InputError
     from fusiongs.events.h5 import read_events_h5
-    from fusiongs.io.scene_io import read_scene_spec, scene_json_path
+    from fusiongs.io.scene_io import (
+        check_events_meet_frames,
+        check_frame_files,
+        read_scene_spec,
+        scene_json_path,
+    )
 
     jp = scene_json_path(path)
     spec = read_scene_spec(jp)
@@ -93,6 +100,8 @@ def _read_scene(path, args):
     ep = jp.parent / spec.events_path
     ev = read_events_h5(ep, spec.camera.width, spec.camera.height, spec.cfa,
                         sort=args.sort, drop_invalid=args.drop_invalid)
+    check_events_meet_frames(int(ev.t[0]), int(ev.t[-1]), spec, ep)
+    check_frame_files(spec, jp.parent, str(jp))
     import numpy as np
 
     frames_t = (np.rint(np.array([f.t_start for f in spec.frames], np.float64) * 1e6).astype(np.int64),

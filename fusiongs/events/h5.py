@@ -42,11 +42,25 @@ def open_h5(path: str | Path):
     try:
         f = h5py.File(path, "r")
     except OSError as e:
-        raise InputError(path, "file", "a readable HDF5 file (truncated or corrupt?)", str(e)) from None
+        raise InputError(path, "file", "a readable HDF5 file (truncated or corrupt?)",
+                         _h5_reason(e)) from None
     try:
         yield f
     finally:
         f.close()
+
+
+def _h5_reason(e: OSError) -> str:
+    """HDF5's open error in a few words (``truncated: 1000 of 30480 bytes``)."""
+    import re
+
+    msg = str(e)
+    m = re.search(r"truncated file: eof = (\d+).*stored_eof = (\d+)", msg)
+    if m:
+        return f"truncated: {m.group(1)} of {m.group(2)} bytes"
+    if "signature not found" in msg:
+        return "not an HDF5 file (no HDF5 signature)"
+    return msg
 
 
 def read_dataset(f, key: str, path: str | Path) -> np.ndarray:

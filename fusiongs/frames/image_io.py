@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import struct
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -10,6 +13,19 @@ from fusiongs.atomic import write_bytes
 from fusiongs.errors import InputError, MissingDependencyError
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_IEND = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # the 12-byte chunk every complete PNG ends with
+_PNG_CHANNELS = {0: 1, 2: 3, 3: 3, 4: 2, 6: 4}  # IHDR colour type -> samples per pixel (palette: RGB)
+
+
+@dataclass(frozen=True)
+class ImageInfo:
+    """Size of an image file without its pixels: ``width`` x ``height``, ``channels`` samples per
+    pixel (1 grey, 3 RGB; 2 or 4 with alpha, which :func:`read_image` refuses)."""
+
+    width: int
+    height: int
+    channels: int
 
 
 def is_raw_path(path: str | Path) -> bool:
@@ -28,14 +44,20 @@ def read_image(path: str | Path) -> np.ndarray:
         or 1 (grey).
 
     Raises:
-        InputError: unreadable file, an alpha channel, or a bit depth other than 8/16.
+        InputError: unreadable file, a truncated or damaged PNG (see :func:`png_info`), an alpha
+            channel, or a bit depth other than 8/16.
     """
     import cv2
 
     path = Path(path)
     if not path.is_file():
         raise InputError(path, "image", "an existing image file", "no such file")
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    data = path.read_bytes()
+    if not data:
+        raise InputError(path, "image", "a PNG or JPEG file", "an empty file (0 bytes)")
+    if _looks_like_png(path, data):
+        png_info(path, data)  # truncated or damaged: named here, before libpng prints its own error
+    img = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
     if img is None:
         raise InputError(path, "image", "a PNG or JPEG file OpenCV can decode", "undecodable")
     if img.dtype == np.uint8:
@@ -51,6 +73,99 @@ def read_image(path: str | Path) -> np.ndarray:
     elif img.shape[2] != 1:
         raise InputError(path, "image", "1 (grey) or 3 (RGB) channels", f"{img.shape[2]} channels")
     return (img.astype(np.float32) / np.float32(scale)).copy()
+
+
+def _looks_like_png(path: Path, data: bytes) -> bool:
+    head = data[:8]
+    return head == PNG_SIGNATURE or (path.suffix.lower() == ".png" and PNG_SIGNATURE.startswith(head))
+
+
+def _png_header(path: Path, head: bytes) -> ImageInfo:
+    """:class:`ImageInfo` from the first 33 bytes of a PNG (signature and IHDR chunk)."""
+    if head[:8] != PNG_SIGNATURE and not (len(head) < 8 and PNG_SIGNATURE.startswith(head)):
+        raise InputError(path, "image", "a PNG file", f"first bytes {head[:8]!r}")
+    if len(head) < 33:
+        raise InputError(path, "image", "a complete PNG file (truncated?)", f"{len(head)} bytes in all")
+    n, ctype, w, h, depth, colour = struct.unpack(">I4sIIBB", head[8:26])
+    if ctype != b"IHDR" or n != 13 or w == 0 or h == 0 or colour not in _PNG_CHANNELS:
+        raise InputError(path, "image", "a PNG file starting with a valid IHDR chunk (corrupt?)",
+                         f"chunk {ctype!r} of {n} bytes, {w}x{h}, colour type {colour}")
+    return ImageInfo(int(w), int(h), _PNG_CHANNELS[colour])
+
+
+def png_info(path: str | Path, data: bytes | None = None) -> ImageInfo:
+    """Size and channels of a PNG file from its IHDR chunk, checking that the file is complete.
+
+    Args:
+        path: the PNG file (named in errors).
+        data: the whole file when already in memory: then every chunk is walked and its CRC
+            verified (catches damage anywhere). Without it only the 33-byte header and the 12-byte
+            trailer are read (two small reads, no decoding): a file that does not end with the IEND
+            chunk (truncated, or with bytes after IEND) is then read whole and walked.
+
+    Raises:
+        InputError: naming the file: not a PNG, truncated (where the file ends), a damaged chunk
+            (CRC mismatch, naming the chunk and its byte offset), or no IEND chunk.
+    """
+    path = Path(path)
+    if data is None:
+        try:
+            with open(path, "rb") as f:
+                head = f.read(33)
+                size = f.seek(0, 2)
+                f.seek(max(size - 12, 0))
+                tail = f.read(12)
+        except OSError as e:
+            raise InputError(path, "image", "a readable PNG file", e.strerror) from None
+        info = _png_header(path, head)
+        if tail == _PNG_IEND and size >= 45:
+            return info
+        data = path.read_bytes()
+    info = _png_header(path, data[:33])
+    buf, pos, size = memoryview(data), 8, len(data)
+    while True:
+        if pos + 12 > size:
+            raise InputError(path, "image", "a complete PNG file (truncated?)",
+                             f"{size} bytes, ending inside the chunk header at byte {pos}")
+        n, ctype = struct.unpack(">I4s", buf[pos:pos + 8])
+        end = pos + 12 + n
+        name = ctype.decode("latin-1")
+        if end > size:
+            raise InputError(path, "image", "a complete PNG file (truncated?)",
+                             f"{size} bytes, ending inside chunk {name} at byte {pos} (needs {end})")
+        if zlib.crc32(buf[pos + 4:end - 4]) != struct.unpack(">I", buf[end - 4:end])[0]:
+            raise InputError(path, "image", "an undamaged PNG file (corrupt?)",
+                             f"chunk {name} at byte {pos} fails its CRC check")
+        if ctype == b"IEND":
+            return info
+        pos = end
+
+
+def image_info(path: str | Path, *, verify: bool = True) -> ImageInfo:
+    """Size and channels of a frame file as :func:`fusiongs.io.load_scene` reads it, without
+    decoding a PNG's pixels; other formats are decoded (a raw file counts as RGB: it is demosaiced
+    on loading).
+
+    Args:
+        path: the image file.
+        verify: read a PNG whole and check every chunk's CRC (damage anywhere); ``False`` reads
+            only its header and trailer (truncation). See :func:`png_info`.
+
+    Raises:
+        InputError: naming the file when it is missing, truncated or unreadable.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(path, "image", "an existing image file", "no such file")
+    if is_raw_path(path):
+        mos, _ = read_raw_mosaic(path)
+        return ImageInfo(int(mos.shape[1]), int(mos.shape[0]), 3)
+    with open(path, "rb") as f:
+        head = f.read(8)
+    if head and _looks_like_png(path, head):
+        return png_info(path, path.read_bytes() if verify else None)
+    img = read_image(path)
+    return ImageInfo(int(img.shape[1]), int(img.shape[0]), int(img.shape[2]))
 
 
 def write_png(path: str | Path, img: np.ndarray, bits: int = 8) -> None:

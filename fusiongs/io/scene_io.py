@@ -15,7 +15,7 @@ import numpy as np
 
 from fusiongs.errors import InputError
 from fusiongs.frames.frameset import FrameSet
-from fusiongs.frames.image_io import is_raw_path, read_image, read_raw, write_png
+from fusiongs.frames.image_io import image_info, is_raw_path, read_image, read_raw, write_png
 from fusiongs.frames.response import linear_to_response
 from fusiongs.io.scene import Scene
 from fusiongs.io.scene_json import FrameEntry, SceneSpec, parse_scene_dict, scene_spec_to_dict
@@ -56,28 +56,80 @@ def _frame_names(entries: tuple[FrameEntry, ...]) -> tuple[str, ...]:
     return tuple(f"{i:06d}_{s}" for i, s in enumerate(stems))
 
 
+def _frame_path(spec: SceneSpec, root: Path, where: str, i: int) -> Path:
+    p = _resolve(root, spec.frames[i].path)
+    if not p.is_file():
+        raise InputError(where, f"frames[{i}].path", "an existing image file", str(p))
+    return p
+
+
+def _check_frame_shape(spec: SceneSpec, where: str, i: int, p: Path, width: int, height: int,
+                       channels: int, first_channels: int | None) -> None:
+    """One frame against the camera, ``frames[0]`` and the event sensor's CFA."""
+    cam, key = spec.camera, f"frames[{i}].path"
+    if (width, height) != (cam.width, cam.height):
+        raise InputError(p, key, f"an image of the camera size {cam.width}x{cam.height} (scene.json "
+                         "camera.width x camera.height)", f"{width}x{height}")
+    if channels not in (1, 3):
+        raise InputError(p, key, "1 (grey) or 3 (RGB) channels", f"{channels} channels (alpha?)")
+    if first_channels is not None and channels != first_channels:
+        raise InputError(p, key, f"{first_channels} channel(s) like frames[0]", f"{channels} channel(s)")
+    if spec.cfa is not None and channels != 3:
+        raise InputError(where, "events.cfa", f"RGB frames for the colour event sensor {spec.cfa!r} "
+                         "(or null for a monochrome event sensor)",
+                         f"single-channel {key} {spec.frames[i].path}")
+
+
+def check_frame_files(spec: SceneSpec, root: str | Path, where: str) -> None:
+    """The frame checks of :func:`load_scene` without decoding PNG pixels (``fusiongs inspect``):
+    every frame exists, is a complete and undamaged PNG (chunk CRCs), has the camera size and
+    ``frames[0]``'s channels, and is RGB when the events have a CFA.
+
+    Raises:
+        InputError: naming the frame file, its size and the expected one (or the channels).
+    """
+    first = None
+    for i in range(len(spec.frames)):
+        p = _frame_path(spec, Path(root), where, i)
+        info = image_info(p)
+        _check_frame_shape(spec, where, i, p, info.width, info.height, info.channels, first)
+        first = info.channels if first is None else first
+
+
+def check_events_meet_frames(t_first_us: int, t_last_us: int, spec: SceneSpec,
+                             events_file: str | Path) -> None:
+    """The event stream must overlap the frames' time range (events between frames are normal;
+    a stream entirely before the first exposure or after the last one is a clock or unit mix-up).
+
+    Raises:
+        InputError: naming the event file and both time ranges in seconds.
+    """
+    if not spec.frames:
+        return
+    f0 = min(f.t_start for f in spec.frames)
+    f1 = max(f.t_end for f in spec.frames)
+    if t_last_us < round(f0 * 1e6) or t_first_us > round(f1 * 1e6):
+        raise InputError(events_file, "events/t", "events overlapping the frames' exposures (events.h5 "
+                         "times in µs and scene.json times in seconds, on one clock)",
+                         f"events in [{t_first_us * 1e-6:.6f}, {t_last_us * 1e-6:.6f}] s, frames in "
+                         f"[{f0:.6f}, {f1:.6f}] s")
+
+
 def _load_frames(spec: SceneSpec, root: Path, where: str) -> FrameSet:
     cam = spec.camera
     if not spec.frames:
         return FrameSet.empty(cam.height, cam.width, 3, spec.frame_response)
     images = []
-    for i, f in enumerate(spec.frames):
-        key = f"frames[{i}].path"
-        p = _resolve(root, f.path)
-        if not p.is_file():
-            raise InputError(where, key, "an existing image file", str(p))
+    for i in range(len(spec.frames)):
+        p = _frame_path(spec, root, where, i)
         if is_raw_path(p):
             # Raw frames are linear; they are stored encoded like the other frames.
             lin = np.clip(read_raw(p, demosaic="opencv-ea"), 0.0, 1.0)
             img = np.asarray(linear_to_response(lin, spec.frame_response), dtype=np.float32)
         else:
             img = read_image(p)
-        if img.shape[:2] != (cam.height, cam.width):
-            raise InputError(p, key, f"an image of the camera size {cam.width}x{cam.height}",
-                             f"{img.shape[1]}x{img.shape[0]}")
-        if images and img.shape[2] != images[0].shape[2]:
-            raise InputError(p, key, f"{images[0].shape[2]} channel(s) like frames[0]",
-                             f"{img.shape[2]} channel(s)")
+        _check_frame_shape(spec, where, i, p, img.shape[1], img.shape[0], img.shape[2],
+                           images[0].shape[2] if images else None)
         images.append(img)
     return FrameSet(np.stack(images), np.array([f.t_start for f in spec.frames]),
                     np.array([f.t_end for f in spec.frames]), _frame_names(spec.frames),
@@ -100,7 +152,10 @@ def load_scene(path: str | Path, *, sort_events: bool = False, drop_invalid_even
 
     Raises:
         InputError: naming ``scene.json`` or the faulty frame / events / trajectory file and the
-            key path (``frames[3].path``, ``events.path``, ``trajectory``, ...).
+            key path (``frames[3].path``, ``events.path``, ``trajectory``, ...): besides the checks
+            of :func:`~fusiongs.io.scene_json.parse_scene_dict`, a missing, truncated or corrupt
+            file, a frame whose size is not the camera's, single-channel frames with a CFA, or an
+            event stream that does not overlap the frames' time range (µs vs seconds mix-up).
     """
     jp = scene_json_path(path)
     spec = read_scene_spec(jp)
@@ -115,6 +170,7 @@ def load_scene(path: str | Path, *, sort_events: bool = False, drop_invalid_even
 
             events = read_events_h5(ep, spec.camera.width, spec.camera.height, spec.cfa,
                                     sort=sort_events, drop_invalid=drop_invalid_events)
+            check_events_meet_frames(int(events.t[0]), int(events.t[-1]), spec, ep)
     frames = _load_frames(spec, root, where)
     poses = None
     if spec.trajectory is not None:

@@ -96,6 +96,25 @@ def _camera(d: dict, where: str) -> PinholeCamera:
                          vals["cy"], dist)
 
 
+def _check_frame_order(frames: list[FrameEntry], where: str) -> None:
+    """Frames in time order with exposures that do not overlap (one camera exposes one frame at a
+    time); compared in whole µs, the events' clock, so windows that touch are fine."""
+    def us(t: float) -> int:
+        return round(t * 1e6)
+
+    for i in range(1, len(frames)):
+        a, b = frames[i - 1], frames[i]
+        if us(b.t_start) < us(a.t_start):
+            raise InputError(where, f"frames[{i}].t_start", "frames listed in time order (sorted by t_start)",
+                             f"frames[{i}] ({b.path}) starts at {b.t_start} s, before frames[{i - 1}] "
+                             f"({a.path}) at {a.t_start} s")
+        if us(b.t_start) < us(a.t_end):
+            raise InputError(where, f"frames[{i}].t_start", "exposures that do not overlap (each frame "
+                             "starts at or after the previous one ends)",
+                             f"frames[{i}] ({b.path}) starts at {b.t_start} s, before frames[{i - 1}] "
+                             f"({a.path}) ends at {a.t_end} s")
+
+
 def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
     """Validate a decoded ``scene.json`` document.
 
@@ -107,8 +126,9 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
         InputError: on a wrong ``format``/``version``, a missing required key (``format``,
             ``version``, ``camera``, the camera's numbers, ``events.path``, ``frames[i].path``,
             ``t_start``, ``t_end``, ``renders[i].name``/``t``), a wrong type, ``t_end <= t_start``,
-            an unknown CFA or response, duplicate render names, or a non-zero lens distortion
-            (not supported yet: frames and events must be undistorted first).
+            frames out of time order or with overlapping exposures, an unknown CFA or response, a
+            CFA with an odd camera width or height, duplicate render names, or a non-zero lens
+            distortion (not supported yet: frames and events must be undistorted first).
     """
     d = _obj(doc, where, "(top level)")
     if d.get("format") != SCENE_FORMAT:
@@ -125,6 +145,10 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
         cfa = e.get("cfa")
         if cfa is not None and cfa not in CFA_PATTERNS:
             raise InputError(where, "events.cfa", f"null or one of {', '.join(CFA_PATTERNS)}", repr(cfa))
+        if cfa is not None and (camera.width % 2 or camera.height % 2):
+            raise InputError(where, "events.cfa", f"an even camera width and height for the 2x2 {cfa} "
+                             "pattern (crop the sensor to even size)",
+                             f"camera {camera.width}x{camera.height}")
     frames_raw = d.get("frames", [])
     if frames_raw is None:
         frames_raw = []
@@ -138,8 +162,10 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
         t0 = _number(fr, "t_start", where, f"{key}.")
         t1 = _number(fr, "t_end", where, f"{key}.")
         if not t1 > t0:
-            raise InputError(where, f"{key}.t_end", "t_end > t_start (seconds)", f"{t1} <= {t0}")
+            raise InputError(where, f"{key}.t_end", "t_end > t_start (seconds)",
+                             f"t_end {t1} <= t_start {t0} for {p}")
         frames.append(FrameEntry(p, t0, t1))
+    _check_frame_order(frames, where)
     response = d.get("frame_response", "srgb")
     if response is None:
         response = "srgb"

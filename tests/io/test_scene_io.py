@@ -36,9 +36,9 @@ def _scene(channels=3, cfa="RGGB", bits=8) -> Scene:
     return Scene(cam, ev, fs, poses, (RenderRequest("deblur_0", 0.02), RenderRequest("novel", 0.09)))
 
 
-@pytest.mark.parametrize("channels,bits", [(3, 8), (1, 16)])
-def test_save_then_load_round_trips_everything(tmp_path, channels, bits):
-    scene = _scene(channels, bits=bits)
+@pytest.mark.parametrize("channels,bits,cfa", [(3, 8, "RGGB"), (1, 16, None)])  # grey frames: grey events
+def test_save_then_load_round_trips_everything(tmp_path, channels, bits, cfa):
+    scene = _scene(channels, cfa, bits=bits)
     jp = save_scene(scene, tmp_path / "s", images_bits=bits)
     assert jp == tmp_path / "s" / "scene.json"
     got = load_scene(tmp_path / "s")
@@ -48,7 +48,7 @@ def test_save_then_load_round_trips_everything(tmp_path, channels, bits):
     assert got.frames.names == scene.frames.names and got.frames.response == "gamma:2.2"
     for k in "txyp":
         np.testing.assert_array_equal(getattr(got.events, k), getattr(scene.events, k))
-    assert got.events.cfa == "RGGB" and (got.events.width, got.events.height) == (W, H)
+    assert got.events.cfa == cfa and (got.events.width, got.events.height) == (W, H)
     np.testing.assert_allclose(got.poses.c2w, scene.poses.c2w, atol=1e-8)
     assert load_scene(jp, load_events=False).events is None  # scene.json path works too
 

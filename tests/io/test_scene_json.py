@@ -21,18 +21,20 @@ names = st.text("abcdefghijklmnopqrstuvwxyz0123456789_-", min_size=1, max_size=8
 
 @st.composite
 def specs(draw):
-    cam = PinholeCamera(draw(st.integers(1, 4096)), draw(st.integers(1, 4096)), draw(positive),
-                        draw(positive), draw(finite), draw(finite),
-                        draw(st.none() | st.just((0.0,) * 5)))
     frames = []
-    for _ in range(draw(st.integers(0, 4))):
-        t0 = draw(st.floats(0, 100, allow_nan=False))
-        frames.append(FrameEntry(f"frames/{draw(names)}.png", t0, t0 + draw(st.floats(1e-4, 1.0))))
+    t = draw(st.floats(0, 100, allow_nan=False))
+    for _ in range(draw(st.integers(0, 4))):  # in time order, exposures touching or apart
+        t0 = t + draw(st.sampled_from([0.0, 0.5]))
+        t = t0 + draw(st.floats(1e-4, 1.0))
+        frames.append(FrameEntry(f"frames/{draw(names)}.png", t0, t))
+    has_events = draw(st.booleans()) or not frames
+    cfa = draw(st.sampled_from([None, "RGGB", "BGGR", "GRBG", "GBRG"])) if has_events else None
+    size = st.integers(1, 4096) if cfa is None else st.integers(1, 2048).map(lambda v: 2 * v)  # 2x2 CFA
+    cam = PinholeCamera(draw(size), draw(size), draw(positive), draw(positive), draw(finite), draw(finite),
+                        draw(st.none() | st.just((0.0,) * 5)))
     render_names = draw(st.lists(names, unique=True, max_size=4))
     renders = tuple(RenderRequest(n, draw(finite)) for n in render_names)
-    has_events = draw(st.booleans()) or not frames
-    return SceneSpec(cam, "events.h5" if has_events else None,
-                     draw(st.sampled_from([None, "RGGB", "BGGR", "GRBG", "GBRG"])) if has_events else None,
+    return SceneSpec(cam, "events.h5" if has_events else None, cfa,
                      tuple(frames), draw(st.sampled_from(["srgb", "linear", "gamma:2.2"])),
                      draw(st.none() | st.just("trajectory.txt")), renders)
 
@@ -104,6 +106,10 @@ CASES = [
     (("frames", 0, "t_end"), _DEL, r"frames\[0\].t_end"),
     (("frames", 1, "t_end"), 0.08, r"frames\[1\].t_end"),
     (("frames", 1, "t_end"), float("nan"), r"frames\[1\].t_end"),
+    (("frames", 1, "t_start"), 0.05, r"frames\[1\].t_start: expected exposures that do not overlap"),
+    (("frames", 1, "t_start"), 0.0, r"frames\[1\].t_start: expected frames listed in time order"),
+    (("camera", "width"), 345, "events.cfa: expected an even camera width and height"),
+    (("camera", "height"), 259, "events.cfa: expected an even camera width and height"),
     (("frame_response",), "log", "frame_response"),
     (("frame_response",), "gamma:0", "frame_response"),
     (("trajectory",), 5, "trajectory"),
