@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.pinhole import PinholeCamera, SceneCamera, UncalibratedCamera
 from fusiongs.errors import InputError
 from fusiongs.events.stream import CFA_PATTERNS
 from fusiongs.frames.response import parse_response
@@ -33,7 +33,7 @@ class FrameEntry:
 class SceneSpec:
     """The validated content of a ``scene.json`` (paths as written, relative to the scene folder)."""
 
-    camera: PinholeCamera
+    camera: SceneCamera
     events_path: str | None = None
     cfa: str | None = None
     frames: tuple[FrameEntry, ...] = ()
@@ -67,7 +67,25 @@ def _str(v: object, where: str, key: str) -> str:
     return v
 
 
-def _camera(d: dict, where: str) -> PinholeCamera:
+def _intrinsics(c: dict, where: str) -> dict[str, float] | None:
+    """``fx, fy, cx, cy`` of ``camera``, or ``None`` when all four are absent ("estimate them")."""
+    keys = ("fx", "fy", "cx", "cy")
+    missing = [k for k in keys if k not in c]
+    if len(missing) == len(keys):
+        return None
+    if missing:
+        raise InputError(where, ", ".join(f"camera.{k}" for k in missing),
+                         "all four of camera.fx, fy, cx, cy, or none of them (then the intrinsics "
+                         "are estimated from the frames)",
+                         f"only {', '.join(k for k in keys if k not in missing)}")
+    vals = {k: _number(c, k, where, "camera.") for k in keys}
+    for k in ("fx", "fy"):
+        if vals[k] <= 0:
+            raise InputError(where, f"camera.{k}", "a positive focal length in pixels", vals[k])
+    return vals
+
+
+def _camera(d: dict, where: str) -> SceneCamera:
     if "camera" not in d:
         raise InputError(where, "camera", "a camera object (required key missing)")
     c = _obj(d["camera"], where, "camera")
@@ -77,10 +95,7 @@ def _camera(d: dict, where: str) -> PinholeCamera:
         if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
             raise InputError(where, f"camera.{k}", "a positive integer", repr(v))
         size[k] = v
-    vals = {k: _number(c, k, where, "camera.") for k in ("fx", "fy", "cx", "cy")}
-    for k in ("fx", "fy"):
-        if vals[k] <= 0:
-            raise InputError(where, f"camera.{k}", "a positive focal length in pixels", vals[k])
+    vals = _intrinsics(c, where)
     dist = c.get("distortion")
     if dist is not None:
         if not isinstance(dist, list) or len(dist) != 5 or not all(_is_number(v) for v in dist):
@@ -92,6 +107,8 @@ def _camera(d: dict, where: str) -> PinholeCamera:
                              "distortion coefficients are not supported yet, undistort the frames and "
                              "events first (OpenCV undistort / undistortPoints) and remove the key",
                              repr(list(dist)))
+    if vals is None:
+        return UncalibratedCamera(size["width"], size["height"], dist)
     return PinholeCamera(size["width"], size["height"], vals["fx"], vals["fy"], vals["cx"],
                          vals["cy"], dist)
 
@@ -124,11 +141,13 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
 
     Raises:
         InputError: on a wrong ``format``/``version``, a missing required key (``format``,
-            ``version``, ``camera``, the camera's numbers, ``events.path``, ``frames[i].path``,
-            ``t_start``, ``t_end``, ``renders[i].name``/``t``), a wrong type, ``t_end <= t_start``,
-            frames out of time order or with overlapping exposures, an unknown CFA or response, a
-            CFA with an odd camera width or height, duplicate render names, or a non-zero lens
-            distortion (not supported yet: frames and events must be undistorted first).
+            ``version``, ``camera``, some but not all of the camera's ``fx, fy, cx, cy`` (all four
+            absent give an :class:`~fusiongs.camera.pinhole.UncalibratedCamera`), ``events.path``,
+            ``frames[i].path``, ``t_start``, ``t_end``, ``renders[i].name``/``t``), a wrong type,
+            ``t_end <= t_start``, frames out of time order or with overlapping exposures, an unknown
+            CFA or response, a CFA with an odd camera width or height, duplicate render names, or a
+            non-zero lens distortion (not supported yet: frames and events must be undistorted
+            first).
     """
     d = _obj(doc, where, "(top level)")
     if d.get("format") != SCENE_FORMAT:
@@ -145,10 +164,6 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
         cfa = e.get("cfa")
         if cfa is not None and cfa not in CFA_PATTERNS:
             raise InputError(where, "events.cfa", f"null or one of {', '.join(CFA_PATTERNS)}", repr(cfa))
-        if cfa is not None and (camera.width % 2 or camera.height % 2):
-            raise InputError(where, "events.cfa", f"an even camera width and height for the 2x2 {cfa} "
-                             "pattern (crop the sensor to even size)",
-                             f"camera {camera.width}x{camera.height}")
     frames_raw = d.get("frames", [])
     if frames_raw is None:
         frames_raw = []
@@ -197,7 +212,9 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
 def scene_spec_to_dict(spec: SceneSpec) -> dict:
     """The ``scene.json`` document of ``spec`` (inverse of :func:`parse_scene_dict`)."""
     c = spec.camera
-    cam = {"width": c.width, "height": c.height, "fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy}
+    cam: dict = {"width": c.width, "height": c.height}
+    if isinstance(c, PinholeCamera):
+        cam.update(fx=c.fx, fy=c.fy, cx=c.cx, cy=c.cy)
     if c.distortion is not None:
         cam["distortion"] = list(c.distortion)
     doc: dict = {"format": SCENE_FORMAT, "version": SCENE_VERSION, "camera": cam}

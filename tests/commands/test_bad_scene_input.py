@@ -180,10 +180,8 @@ def test_colour_events_with_monochrome_frames(tmp_path, capfd, verb):
 @pytest.mark.parametrize("verb", [INSPECT, EDI])
 @pytest.mark.parametrize("cfa,size,words", [
     ("RGBG", (W, H), ["events.cfa", "RGGB, BGGR, GRBG, GBRG", "'RGBG'"]),
-    ("RGGB", (15, H), ["events.cfa", "even camera width and height", "camera 15x12"]),
-    ("GRBG", (W, 13), ["events.cfa", "even camera width and height", "camera 16x13"]),
 ])
-def test_unknown_cfa_or_odd_sensor_with_a_cfa(tmp_path, capfd, verb, cfa, size, words):
+def test_unknown_cfa(tmp_path, capfd, verb, cfa, size, words):
     scene = _scene_folder(tmp_path / "scene", width=size[0], height=size[1])
 
     def edit(doc):
@@ -195,8 +193,14 @@ def test_unknown_cfa_or_odd_sensor_with_a_cfa(tmp_path, capfd, verb, cfa, size, 
         assert w in line
 
 
-def test_odd_sensor_without_a_cfa_is_fine(tmp_path):
-    assert cli.main(["inspect", str(_scene_folder(tmp_path / "scene", width=15, height=13))]) == 0
+@pytest.mark.parametrize("cfa", [None, "RGGB"])
+def test_odd_sensor_is_fine(tmp_path, cfa):
+    # A 2x2 pattern on an odd-sized sensor just has a partial last row/column (the simulator's
+    # 173x130 default sensor is such a one).
+    scene = _scene_folder(tmp_path / "scene", width=15, height=13)
+    if cfa is not None:
+        _edit_json(scene, lambda doc: doc["events"].__setitem__("cfa", cfa))
+    assert cli.main(["inspect", str(scene)]) == 0
 
 
 # 7. trajectory times that do not increase
