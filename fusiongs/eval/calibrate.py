@@ -413,13 +413,9 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     a tile bootstrap of the normal equations.
     """
     tp, tn = start
-    log_l = log_sharp(data, tp, tn)
-    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]
-    r = y - tp * data.dn[:, 0] + tn * data.dn[:, 1]
-    med = torch.where(data.valid, r, torch.full_like(r, float("nan"))).nanmedian(dim=1, keepdim=True).values
-    dev = (r - med).abs()
-    mad = torch.where(data.valid, dev, torch.full_like(dev, float("nan"))).nanmedian()
-    keep = data.valid & (dev <= trim * 1.4826 * mad)
+    # Trimmed once, at the starting fit: re-trimming at each new estimate selects on the residual
+    # the estimate is made from (measured on tuning scenes: errors up to 29 % instead of 17 %).
+    keep = _inliers(data, log_sharp(data, tp, tn), tp, tn, trim)
     sums = None
     for _ in range(iters):
         sums = _iv_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets)
@@ -437,7 +433,34 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
         ok = torch.isfinite(sol).all(1) & (sol > 0).all(1)
         std_p, std_n = (float(v) for v in sol[ok].std(0)) if ok.sum() > 2 else (std_p, std_n)
     return {"theta_pos": tp, "theta_neg": tn, "std_pos": std_p, "std_neg": std_n,
-            "kept": int(keep.sum())}
+            "kept": int(keep.sum()), "agreement": agreement(data, tp, tn, keep)}
+
+
+def _inliers(data: PairData, log_l: torch.Tensor, tp: float, tn: float, trim: float) -> torch.Tensor:
+    """``[Q, P]`` valid pixel pairs whose residual at ``(tp, tn)`` lies within ``trim`` robust standard
+    deviations (1.4826 MAD) of its pair's median."""
+    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]
+    r = y - tp * data.dn[:, 0] + tn * data.dn[:, 1]
+    nan = torch.full_like(r, float("nan"))
+    med = torch.where(data.valid, r, nan).nanmedian(dim=1, keepdim=True).values
+    dev = (r - med).abs()
+    mad = torch.where(data.valid, dev, nan).nanmedian()
+    return data.valid & (dev <= trim * 1.4826 * mad)
+
+
+def agreement(data: PairData, theta_pos: float, theta_neg: float, keep: torch.Tensor) -> float:
+    """How well events explain the frames: the correlation, over kept pixel pairs (centred per
+    pair), between the EDI log change and ``theta_+ N_+ - theta_- N_-``. Near 1 when events and
+    frames agree; low for sensors whose events carry little (heavy noise, large thresholds)."""
+    log_l = log_sharp(data, theta_pos, theta_neg)
+    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]
+    x = theta_pos * data.dn[:, 0] - theta_neg * data.dn[:, 1]
+    w = keep.to(y.dtype)
+    cnt = w.sum(1, keepdim=True).clamp_min(1.0)
+    yc = (y - (y * w).sum(1, keepdim=True) / cnt) * w
+    xc = (x - (x * w).sum(1, keepdim=True) / cnt) * w
+    den = float(torch.sqrt((yc * yc).sum() * (xc * xc).sum()))
+    return float((yc * xc).sum()) / den if den > 0 else 0.0
 
 
 def neighbour_counts(between: np.ndarray, height: int, width: int, step: int) -> np.ndarray:
@@ -572,7 +595,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         out_n.append(res["theta_neg"])
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
-        per.append({k: res[k] for k in ("pixels", "residuals", "log_units", "count_units")})
+        per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
+                                            "count_units")})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     return SensorThresholds(names, np.array(out_p), np.array(out_n), np.array(sd_p), np.array(sd_n),
