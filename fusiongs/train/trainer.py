@@ -261,7 +261,7 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
     cfa = scene.events.cfa if scene.events is not None else None
     if calibration is not None:
         return calibration.for_sensor(cfa)
-    if not (cfg.threshold.estimate and data.events is not None and len(scene.events)):
+    if not (cfg.threshold.estimate and scene.events is not None and len(scene.events)):
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
     from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 
