@@ -4,10 +4,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import torch
 
 from fusiongs.errors import InputError
+
+
+def _check_size(width: object, height: object) -> None:
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
+            raise InputError("camera", name, "a positive integer", repr(v))
+
+
+def _check_distortion(distortion: tuple[float, ...] | None) -> None:
+    if distortion is not None and len(distortion) != 5:
+        raise InputError("camera", "distortion", "5 numbers [k1, k2, p1, p2, k3]",
+                         f"{len(distortion)} numbers")
 
 
 @dataclass(frozen=True)
@@ -19,6 +32,8 @@ class PinholeCamera:
         fx, fy: focal lengths in pixels.
         cx, cy: principal point in pixels.
         distortion: optional OpenCV ``[k1, k2, p1, p2, k3]``; ``None`` for an ideal pinhole.
+        intrinsics_known: always ``True`` (class constant; :class:`UncalibratedCamera` has
+            ``False``), so ``scene.camera.intrinsics_known`` tells the two apart.
     """
 
     width: int
@@ -28,21 +43,17 @@ class PinholeCamera:
     cx: float
     cy: float
     distortion: tuple[float, ...] | None = None
+    intrinsics_known: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
-        for name in ("width", "height"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v <= 0:
-                raise InputError("camera", name, "a positive integer", repr(v))
+        _check_size(self.width, self.height)
         for name in ("fx", "fy", "cx", "cy"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise InputError("camera", name, "a finite number", repr(v))
         if self.fx <= 0 or self.fy <= 0:
             raise InputError("camera", "fx/fy", "positive focal lengths", f"{self.fx}, {self.fy}")
-        if self.distortion is not None and len(self.distortion) != 5:
-            raise InputError("camera", "distortion", "5 numbers [k1, k2, p1, p2, k3]",
-                             f"{len(self.distortion)} numbers")
+        _check_distortion(self.distortion)
 
     def K(self, dtype: torch.dtype = torch.float32, device: torch.device | str | None = None) -> torch.Tensor:
         """Intrinsic matrix ``[3, 3]``."""
@@ -55,3 +66,37 @@ class PinholeCamera:
         sx, sy = w / self.width, h / self.height
         return PinholeCamera(w, h, self.fx * sx, self.fy * sy, self.cx * sx, self.cy * sy,
                              self.distortion)
+
+
+@dataclass(frozen=True)
+class UncalibratedCamera:
+    """A camera of known size whose intrinsics are to be estimated (``scene.json`` without
+    ``fx``, ``fy``, ``cx``, ``cy``; FORMAT.md). It has no focal length or principal point, so code
+    that needs them fails loudly until poses and intrinsics are estimated
+    (:func:`fusiongs.camera.poses_from_frames.estimate_camera_and_trajectory`).
+
+    Attributes:
+        width, height: image size in pixels.
+        distortion: optional OpenCV ``[k1, k2, p1, p2, k3]``; ``None`` for an ideal pinhole.
+        intrinsics_known: always ``False`` (class constant).
+    """
+
+    width: int
+    height: int
+    distortion: tuple[float, ...] | None = None
+    intrinsics_known: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        _check_size(self.width, self.height)
+        _check_distortion(self.distortion)
+
+    def guess(self, focal_factor: float = 1.2) -> PinholeCamera:
+        """A starting pinhole: focal ``focal_factor x width`` (COLMAP's default prior), principal
+        point at the image centre."""
+        f = focal_factor * self.width
+        return PinholeCamera(self.width, self.height, f, f, self.width / 2, self.height / 2,
+                             self.distortion)
+
+
+SceneCamera = PinholeCamera | UncalibratedCamera
+"""The camera of a scene: calibrated, or of known size only."""

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.pinhole import SceneCamera
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.events.stream import EventStream
 from fusiongs.frames.frameset import FrameSet
@@ -24,7 +24,10 @@ class Scene:
     """Everything read from one scene folder.
 
     Attributes:
-        camera: shared pinhole camera of frames and events.
+        camera: shared pinhole camera of frames and events: a
+            :class:`~fusiongs.camera.pinhole.PinholeCamera`, or an
+            :class:`~fusiongs.camera.pinhole.UncalibratedCamera` (size only; ``intrinsics_known``
+            is ``False``) when ``scene.json`` has no ``fx, fy, cx, cy`` ("estimate them").
         events: the event stream, or ``None`` when the scene has none.
         frames: the (possibly blurry) frames with exposure windows; may be empty.
         poses: camera-to-world poses from ``trajectory.txt``, or ``None`` ("estimate poses").
@@ -32,7 +35,7 @@ class Scene:
         root: the scene folder it was read from, if any.
     """
 
-    camera: PinholeCamera
+    camera: SceneCamera
     events: EventStream | None
     frames: FrameSet
     poses: PoseSamples | None = None

@@ -96,15 +96,22 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     ``calibration``: a ``calibration.json`` from ``fusiongs calibrate`` (the starting thresholds);
     without it they are estimated the same way. Either way they are written to
     ``out/calibration.json``.
+
+    A scene without trajectory or intrinsics first goes through the pose stage
+    (:func:`fusiongs.train.poses_stage.run_pose_stage`: EDI images registered by pycolmap), which
+    writes ``out/trajectory.txt`` and ``out/camera.json``.
     """
     from fusiongs.events.thresholds import read_calibration, write_calibration
     from fusiongs.train.outputs import write_outputs
+    from fusiongs.train.poses_stage import needs_pose_stage, run_pose_stage
 
     cfg = resolve_config(config, overrides)
     calib = read_calibration(calibration)[0] if calibration is not None else None
     scene = load_scene(scene_path)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    if needs_pose_stage(scene):  # no trajectory or no intrinsics: EDI + pycolmap first
+        scene, calib = run_pose_stage(scene, cfg, out, calib, resume=resume, log=log)
     tr = train(scene, cfg, out, resume=resume, calibration=calib)
     if tr.initial_thresholds is not None:
         write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))

@@ -1,0 +1,368 @@
+"""Intrinsics and a camera trajectory from sharp images at known times (METHOD.md §6).
+
+The images (EDI results at the frames' mid-exposure, or several instants per exposure) are
+registered by COLMAP's incremental structure from motion (pycolmap): SIFT features, exhaustive
+matching for up to ``exhaustive_max`` images, else sequential neighbours plus loop candidates
+(every ``loop_stride``-th image matched with every other one), one shared camera. A known camera
+is held fixed (PINHOLE). An unknown one is SIMPLE_PINHOLE with the principal point at the centre:
+the model is built with the focal length held at ``1.2 x width``, then a profile of bundle
+adjustments over focal lengths refines it, or keeps the guess when the images do not constrain it
+(:mod:`fusiongs.camera.focal`; shallow hand-held recordings often do not).
+
+Registered images give camera-to-world poses (OpenCV axes, the trajectory convention of
+FORMAT.md); the ones that failed are interpolated over time (and extrapolated at the ends) between
+registered neighbours. The reconstruction is moved so that the first registered camera is the
+origin and scaled so that the median depth of its points is ``median_depth`` scene units (COLMAP's
+scale is arbitrary; the default 3 sits inside the trainer's default depth range [1, 12]).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from fusiongs.camera.pinhole import PinholeCamera, SceneCamera
+from fusiongs.camera.tum import PoseSamples
+from fusiongs.errors import InputError, MissingDependencyError
+
+WHERE = "pose estimation"
+HINT = ("give the trajectory (a TUM file named by scene.json \"trajectory\") and/or the intrinsics "
+        "(camera.fx, fy, cx, cy) instead")
+
+
+@dataclass(frozen=True)
+class PoseOptions:
+    """Settings of :func:`estimate_camera_and_trajectory`.
+
+    Attributes:
+        focal_factor: starting focal length of an unknown camera, in image widths.
+        exhaustive_max: match every pair of images up to this many images; beyond, sequential.
+        overlap: sequential matching: each image is matched with the next ``overlap`` ones.
+        loop_stride: sequential matching: every ``loop_stride``-th image is also matched with all
+            the others of that subset (loop candidates, no vocabulary tree needed).
+        peak_threshold: SIFT detection threshold (COLMAP's default 0.0067; lower finds more
+            features in the low-contrast grey images of event cameras).
+        max_features: SIFT features per image.
+        min_inliers: inlier matches to start a model (init) and to register an image (half of it).
+        min_registered: fewer registered images than this is an error.
+        median_depth: median depth of the reconstructed points after scaling (scene units).
+        threads: CPU threads of COLMAP.
+        seed: COLMAP's random seed.
+    """
+
+    focal_factor: float = 1.2
+    exhaustive_max: int = 60
+    overlap: int = 10
+    loop_stride: int = 5
+    peak_threshold: float = 0.002
+    max_features: int = 8192
+    min_inliers: int = 30
+    min_registered: int = 3
+    median_depth: float = 3.0
+    threads: int = 2
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PoseReport:
+    """What the pose stage did (``camera.json``'s ``"report"``).
+
+    Attributes:
+        n_images: images given.
+        registered: images registered in the largest model.
+        failed: names of the images that did not register (their poses are interpolated).
+        focal: ``(fx, fy)`` in pixels of the returned camera.
+        focal_estimated: whether the focal length was estimated (else the given one, held fixed).
+        focal_observable: whether the images constrain the focal length (``None`` when it was
+            given); when not, ``focal`` is the starting guess.
+        focal_profile: ``[(focal px, mean reprojection error px)]`` of the profile (empty when
+            the focal length was given).
+        reprojection_error_px: mean reprojection error of the model (pixels).
+        n_points: 3D points of the model.
+        n_models: models COLMAP built (more than one: the images split into unconnected groups).
+        scale: factor applied to COLMAP's units.
+        seconds: wall time of the stage.
+    """
+
+    n_images: int
+    registered: int
+    failed: tuple[str, ...]
+    focal: tuple[float, float]
+    focal_estimated: bool
+    focal_observable: bool | None
+    focal_profile: tuple[tuple[float, float], ...]
+    reprojection_error_px: float
+    n_points: int
+    n_models: int
+    scale: float
+    seconds: float
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        d["failed"], d["focal"] = list(self.failed), list(self.focal)
+        d["focal_profile"] = [list(p) for p in self.focal_profile]
+        return d
+
+
+@dataclass(frozen=True)
+class PoseEstimate:
+    """Result of :func:`estimate_camera_and_trajectory`.
+
+    Attributes:
+        camera: the pinhole camera (given, or with the estimated focal length).
+        poses: camera-to-world poses at every input time (failed ones interpolated) plus the ends
+            of ``t_range`` when it reaches beyond them (extrapolated).
+        report: registration summary.
+        points: ``[P, 3]`` float64 reconstructed points in the poses' frame and scale.
+        colors: ``[P, 3]`` uint8 colours of the points.
+    """
+
+    camera: PinholeCamera
+    poses: PoseSamples
+    report: PoseReport
+    points: np.ndarray
+    colors: np.ndarray
+
+
+def _pycolmap():
+    try:
+        import pycolmap
+    except ImportError:  # pragma: no cover - a core dependency
+        raise MissingDependencyError("pycolmap", "pose estimation") from None
+    return pycolmap
+
+
+def _check_inputs(camera: SceneCamera, images: np.ndarray, times: np.ndarray,
+                  names: Sequence[str]) -> None:
+    if (images.ndim != 4 or images.shape[1:3] != (camera.height, camera.width)
+            or images.shape[3] not in (1, 3)):
+        raise InputError(WHERE, "images", f"[N, {camera.height}, {camera.width}, 1 or 3] linear images",
+                         images.shape)
+    if times.shape != (images.shape[0],) or not np.all(np.isfinite(times)):
+        raise InputError(WHERE, "times", f"{images.shape[0]} finite times (s), one per image", times.shape)
+    if times.size > 1 and np.any(np.diff(times) <= 0):
+        raise InputError(WHERE, "times", "strictly increasing times", times.tolist())
+    if len(names) != images.shape[0] or len(set(names)) != len(names):
+        raise InputError(WHERE, "names", f"{images.shape[0]} unique image names", len(names))
+
+
+def write_sfm_images(images: np.ndarray, folder: Path) -> list[str]:
+    """Grey 8-bit PNGs for SIFT: luminance scaled by the 99.5th percentile of all images (one
+    scale, so brightness changes stay), then sRGB-encoded. Returns the file names in order."""
+    import cv2
+
+    lum = images.mean(axis=-1).astype(np.float64)
+    finite = lum[np.isfinite(lum)]
+    top = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    lum = np.clip(np.nan_to_num(lum / max(top, 1e-12)), 0.0, 1.0)
+    enc = np.where(lum <= 0.0031308, 12.92 * lum, 1.055 * np.power(lum, 1 / 2.4) - 0.055)
+    folder.mkdir(parents=True, exist_ok=True)
+    files = [f"{i:06d}.png" for i in range(len(images))]
+    for f, img in zip(files, np.round(enc * 255).astype(np.uint8)):
+        if not cv2.imwrite(str(folder / f), img):
+            raise InputError(folder / f, "image", "a writable folder for COLMAP's images", "write failed")
+    return files
+
+
+def _match_pairs(files: list[str], overlap: int, loop_stride: int) -> list[tuple[str, str]]:
+    """Sequential neighbours within ``overlap`` plus all pairs of every ``loop_stride``-th image."""
+    n = len(files)
+    pairs = {(i, j) for i in range(n) for j in range(i + 1, min(i + 1 + overlap, n))}
+    keys = range(0, n, max(loop_stride, 1))
+    pairs |= {(i, j) for i in keys for j in keys if j > i}
+    return [(files[i], files[j]) for i, j in sorted(pairs)]
+
+
+def _run_colmap(pycolmap, camera: SceneCamera, files: list[str], image_dir: Path, work: Path,
+                opts: PoseOptions) -> dict:
+    """Feature extraction, matching and incremental mapping; all models COLMAP kept."""
+    db = work / "database.db"
+    db.unlink(missing_ok=True)
+    reader = pycolmap.ImageReaderOptions()
+    if camera.intrinsics_known:
+        reader.camera_model = "PINHOLE"
+        reader.camera_params = f"{camera.fx},{camera.fy},{camera.cx},{camera.cy}"
+    else:
+        reader.camera_model = "SIMPLE_PINHOLE"
+        reader.camera_params = (f"{opts.focal_factor * camera.width},{camera.width / 2},"
+                                f"{camera.height / 2}")
+    extract = pycolmap.FeatureExtractionOptions()
+    extract.num_threads = opts.threads
+    extract.sift.peak_threshold = opts.peak_threshold
+    extract.sift.max_num_features = opts.max_features
+    cpu = pycolmap.Device.cpu
+    pycolmap.extract_features(db, image_dir, image_names=files, camera_mode=pycolmap.CameraMode.SINGLE,
+                              reader_options=reader, extraction_options=extract, device=cpu)
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = opts.threads
+    if len(files) <= opts.exhaustive_max:
+        pycolmap.match_exhaustive(db, matching_options=matching, device=cpu)
+    else:
+        pair_file = work / "pairs.txt"
+        pair_file.write_text("".join(f"{a} {b}\n" for a, b in _match_pairs(files, opts.overlap,
+                                                                           opts.loop_stride)))
+        pairing = pycolmap.ImportedPairingOptions()
+        pairing.match_list_path = str(pair_file)
+        pycolmap.match_image_pairs(db, matching_options=matching, pairing_options=pairing, device=cpu)
+    mapping = pycolmap.IncrementalPipelineOptions()
+    mapping.num_threads = opts.threads
+    mapping.random_seed = opts.seed
+    mapping.min_model_size = min(opts.min_registered, len(files))
+    mapping.ba_refine_focal_length = False  # unknown: profiled afterwards (fusiongs.camera.focal)
+    mapping.ba_refine_principal_point = False
+    mapping.ba_refine_extra_params = False
+    mapping.mapper.abs_pose_refine_focal_length = False
+    mapping.mapper.abs_pose_refine_extra_params = False
+    mapping.mapper.init_min_num_inliers = opts.min_inliers
+    mapping.mapper.abs_pose_min_num_inliers = max(opts.min_inliers // 2, 6)
+    sparse = work / "sparse"
+    sparse.mkdir(exist_ok=True)
+    return pycolmap.incremental_mapping(db, image_dir, sparse, options=mapping)
+
+
+def _model_poses(rec, files: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """``(registered [N] bool, c2w [N, 4, 4])`` in COLMAP's frame, in the order of ``files``."""
+    index = {f: i for i, f in enumerate(files)}
+    ok = np.zeros(len(files), bool)
+    c2w = np.tile(np.eye(4), (len(files), 1, 1))
+    for im in rec.images.values():
+        if not im.has_pose or im.name not in index:
+            continue
+        w2c = np.eye(4)
+        w2c[:3, :] = np.asarray(im.cam_from_world().matrix())
+        i = index[im.name]
+        ok[i], c2w[i] = True, np.linalg.inv(w2c)
+    return ok, c2w
+
+
+def _points(rec) -> tuple[np.ndarray, np.ndarray]:
+    pts = list(rec.points3D.values())
+    xyz = np.array([p.xyz for p in pts], np.float64).reshape(-1, 3)
+    rgb = np.array([p.color for p in pts], np.uint8).reshape(-1, 3)
+    return xyz, rgb
+
+
+def _median_depth(c2w: np.ndarray, xyz: np.ndarray) -> float:
+    """Median depth of the points in front of the cameras (over all registered cameras; at most
+    about 20,000 points, an even subsample)."""
+    if not len(xyz) or not len(c2w):
+        return float("nan")
+    xyz = xyz[::max(len(xyz) // 20000, 1)]
+    w2c = np.linalg.inv(c2w)
+    z = np.einsum("cj,pj->cp", w2c[:, 2, :3], xyz) + w2c[:, 2, 3:4]
+    z = z[z > 0]
+    return float(np.median(z)) if z.size else float("nan")
+
+
+def fill_poses(t: np.ndarray, known: np.ndarray, c2w: np.ndarray, t_out: np.ndarray) -> np.ndarray:
+    """Poses at ``t_out`` from the ``known`` ones: slerp / linear between the two nearest known
+    samples, continued at constant velocity beyond the first and last one.
+
+    Args:
+        t: ``[N]`` increasing times (s); known: ``[N]`` bool; c2w: ``[N, 4, 4]`` (rows of unknown
+            samples are ignored); t_out: ``[T]`` times.
+
+    Returns:
+        ``[T, 4, 4]`` float64 camera-to-world poses.
+    """
+    from fusiongs.camera.trajectory import interpolate_linear
+
+    kt = torch.from_numpy(np.asarray(t, np.float64)[known])
+    kp = torch.from_numpy(np.asarray(c2w, np.float64)[known])
+    out = interpolate_linear(kt, kp, torch.from_numpy(np.asarray(t_out, np.float64)))
+    return out.numpy().copy()
+
+
+def _normalise(c2w: np.ndarray, xyz: np.ndarray, depth: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """First camera at the origin with identity rotation, median point depth ``depth``."""
+    ref = np.linalg.inv(c2w[0])
+    med = _median_depth(c2w, xyz)
+    if not np.isfinite(med) or med <= 0:  # no points: use the camera path instead
+        centres = c2w[:, :3, 3]
+        med = float(np.linalg.norm(np.diff(centres, axis=0), axis=1).sum()) or 1.0
+    s = depth / med
+    c2w = ref @ c2w
+    c2w[:, :3, 3] *= s
+    xyz = (xyz @ ref[:3, :3].T + ref[:3, 3]) * s
+    return c2w, xyz, s
+
+
+def estimate_camera_and_trajectory(camera: SceneCamera, images: np.ndarray, times: np.ndarray,
+                                   names: Sequence[str] | None = None, *,
+                                   t_range: tuple[float, float] | None = None,
+                                   options: PoseOptions | None = None,
+                                   work_dir: str | Path | None = None) -> PoseEstimate:
+    """Register sharp images with pycolmap and return the camera and its trajectory.
+
+    Args:
+        camera: a :class:`PinholeCamera` (held fixed) or an
+            :class:`~fusiongs.camera.pinhole.UncalibratedCamera` (focal length estimated).
+        images: ``[N, H, W, C]`` linear images (C = 1 or 3), e.g. EDI results.
+        times: ``[N]`` strictly increasing times of the images (s).
+        names: image names for the report (default ``"0"``, ``"1"``, ...).
+        t_range: ``(t0, t1)`` the poses must cover (e.g. the first exposure's start and the last
+            one's end); poses are extrapolated to these ends when they lie outside ``times``.
+        options: :class:`PoseOptions`.
+        work_dir: folder for COLMAP's images, database and model (kept); default a temporary one.
+
+    Returns:
+        :class:`PoseEstimate`.
+
+    Raises:
+        InputError: on images or times of the wrong shape, or when fewer than
+            ``options.min_registered`` images register (too little parallax or texture), naming
+            the counts and how to supply the trajectory or intrinsics instead.
+    """
+    opts = options or PoseOptions()
+    images, times = np.asarray(images), np.asarray(times, np.float64)
+    names = [str(i) for i in range(len(images))] if names is None else [str(n) for n in names]
+    _check_inputs(camera, images, times, names)
+    pycolmap = _pycolmap()
+    start = time.perf_counter()
+    level = pycolmap.logging.minloglevel
+    pycolmap.logging.minloglevel = 3  # quiet: a failure is reported as one InputError below
+    try:
+        with tempfile.TemporaryDirectory(prefix="fusiongs_sfm_") as tmp:
+            work = Path(work_dir) if work_dir is not None else Path(tmp)
+            work.mkdir(parents=True, exist_ok=True)
+            files = write_sfm_images(images, work / "images")
+            recs = _run_colmap(pycolmap, camera, files, work / "images", work, opts)
+        best = max(recs.values(), key=lambda r: r.num_reg_images(), default=None)
+        ok = _model_poses(best, files)[0] if best is not None else np.zeros(len(files), bool)
+        if ok.sum() < opts.min_registered:
+            raise InputError(WHERE, "frames", f"at least {opts.min_registered} images registered by "
+                             f"structure from motion (pycolmap) to estimate the camera path; {HINT}",
+                             f"{int(ok.sum())} of {len(files)} registered (too little texture or "
+                             "parallax: rotation-only motion cannot be reconstructed)")
+        prof = None
+        if not camera.intrinsics_known:
+            from fusiongs.camera.focal import profile_focal
+
+            best, prof = profile_focal(best, opts.focal_factor * camera.width, threads=opts.threads)
+    finally:
+        pycolmap.logging.minloglevel = level
+    ok, c2w = _model_poses(best, files)
+    out_cam = camera if prof is None else PinholeCamera(
+        camera.width, camera.height, prof.focal, prof.focal, camera.width / 2, camera.height / 2,
+        camera.distortion)
+    xyz, rgb = _points(best)
+    reg_c2w, xyz, scale = _normalise(c2w[ok], xyz, opts.median_depth)
+    c2w[ok] = reg_c2w
+    t_out = times
+    if t_range is not None:
+        t_out = np.unique(np.concatenate([[min(t_range[0], times[0])], times, [max(t_range[1], times[-1])]]))
+    poses = PoseSamples(t=t_out, c2w=fill_poses(times, ok, c2w, t_out))
+    report = PoseReport(
+        n_images=len(files), registered=int(ok.sum()), failed=tuple(n for n, k in zip(names, ok) if not k),
+        focal=(out_cam.fx, out_cam.fy), focal_estimated=not camera.intrinsics_known,
+        focal_observable=None if prof is None else prof.observable,
+        focal_profile=() if prof is None else prof.grid,
+        reprojection_error_px=float(best.compute_mean_reprojection_error()), n_points=len(xyz),
+        n_models=len(recs), scale=scale, seconds=time.perf_counter() - start)
+    return PoseEstimate(out_cam, poses, report, xyz, rgb)

@@ -1,0 +1,120 @@
+"""The pose stage of ``fusiongs deblur``: a recording without trajectory or intrinsics."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from fusiongs.cli import main
+from fusiongs.frames.image_io import write_png
+from fusiongs.io import load_scene
+from fusiongs.train.poses_stage import estimate_scene_poses, needs_pose_stage, read_pose_outputs
+from tests.conftest import real_data_dir
+
+TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
+        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
+        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
+
+
+def cut_recording(src, dst, n_frames: int):
+    """The first ``n_frames`` frames of a scene folder and the events up to the last one's end."""
+    from fusiongs.events.h5 import read_events_h5, write_events_h5
+
+    doc = json.loads((src / "scene.json").read_text())
+    doc["frames"] = doc["frames"][:n_frames]
+    (dst / "frames").mkdir(parents=True)
+    for f in doc["frames"]:
+        shutil.copy(src / f["path"], dst / f["path"])
+    cam, ev = doc["camera"], doc["events"]
+    events = read_events_h5(src / ev["path"], cam["width"], cam["height"], ev["cfa"])
+    end_us = round(doc["frames"][-1]["t_end"] * 1e6) + 1
+    write_events_h5(events.slice_time(int(events.t[0]), end_us), dst / "events.h5")
+    doc["events"]["path"] = "events.h5"
+    doc.pop("trajectory", None)
+    (dst / "scene.json").write_text(json.dumps(doc))
+    return dst
+
+
+def _strip_camera(scene_dir):
+    """Remove the trajectory and the intrinsics from a scene folder (what a raw recording has)."""
+    doc = json.loads((scene_dir / "scene.json").read_text())
+    for k in ("fx", "fy", "cx", "cy"):
+        doc["camera"].pop(k)
+    (scene_dir / doc.pop("trajectory")).unlink()
+    (scene_dir / "scene.json").write_text(json.dumps(doc))
+
+
+@pytest.fixture(scope="module")
+def raw_sim_scene(tmp_path_factory):
+    """A small simulated recording (sharp enough views of the textured gallery) without trajectory
+    and intrinsics."""
+    from fusiongs.sim.simulate import SimConfig, run_simulation
+    from fusiongs.sim.write import write_simulated_scene
+
+    root = tmp_path_factory.mktemp("raw")
+    res = run_simulation(SimConfig(preset="gallery", width=173, height=130, duration=0.6, frames=6,
+                                   exposure=0.02, blur_samples=3, dvs_rate_hz=300.0, supersample=1,
+                                   novel=0, seed=0))
+    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    _strip_camera(root)
+    return root
+
+
+def test_deblur_estimates_camera_and_trajectory_first(raw_sim_scene, tmp_path, capsys):
+    scene = load_scene(raw_sim_scene)
+    assert needs_pose_stage(scene)
+    out = tmp_path / "run"
+    assert main(["deblur", str(raw_sim_scene), "-o", str(out), *TINY]) == 0
+    assert "registered 6/6, failed: none" in capsys.readouterr().out
+    doc = json.loads((out / "camera.json").read_text())
+    assert doc["intrinsics"] == doc["trajectory"] == "estimated" and doc["report"]["registered"] == 6
+    restored = read_pose_outputs(out, scene)  # what --resume uses
+    assert restored.camera.fx == doc["camera"]["fx"] and not needs_pose_stage(restored)
+    fs = scene.frames
+    assert restored.poses.t[0] <= fs.t_start[0] and restored.poses.t[-1] >= fs.t_end[-1]
+    assert (out / "deblurred" / f"{fs.names[0]}.png").is_file()
+
+
+def test_a_given_trajectory_is_kept_when_only_the_intrinsics_are_estimated(raw_sim_scene):
+    import dataclasses
+
+    from fusiongs.camera.tum import PoseSamples
+
+    scene = load_scene(raw_sim_scene)
+    given = PoseSamples(t=np.array([0.0, 0.6]), c2w=np.tile(np.eye(4), (2, 1, 1)))
+    scene = dataclasses.replace(scene, poses=given)
+    assert needs_pose_stage(scene)
+    result = estimate_scene_poses(scene)
+    assert result.scene.poses is given and result.scene.camera.intrinsics_known
+    assert result.estimate.report.focal_estimated
+
+
+def test_scene_without_parallax_stops_with_exit_2(tmp_path, capsys):
+    texture = np.random.default_rng(0).uniform(0.1, 0.9, (48, 64, 1))
+    doc = {"format": "fusiongs-scene", "version": 1, "camera": {"width": 64, "height": 48},
+           "frames": [{"path": f"frames/{i}.png", "t_start": 0.1 * i, "t_end": 0.1 * i + 0.05}
+                      for i in range(4)]}
+    for f in doc["frames"]:
+        write_png(tmp_path / f["path"], texture)  # a camera that never moves
+    (tmp_path / "scene.json").write_text(json.dumps(doc))
+    assert main(["deblur", str(tmp_path), "-o", str(tmp_path / "run"), *TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "trajectory" in err[0] and "registered" in err[0]
+
+
+def test_real_recording_cut_registers_every_frame(tmp_path):
+    src = real_data_dir() / "eslnet_cups"
+    if not (src / "scene.json").is_file():
+        pytest.skip(f"real recording eslnet_cups not found in {real_data_dir()}")
+    scene = load_scene(cut_recording(src, tmp_path / "cut", 8))
+    assert not scene.camera.intrinsics_known and scene.poses is None
+    result = estimate_scene_poses(scene)
+    r = result.estimate.report
+    assert r.registered == 8 and r.failed == (), r
+    assert 0.25 * 346 < result.scene.camera.fx < 4 * 346
+    fs = scene.frames
+    assert result.scene.poses.t[0] <= fs.t_start[0] and result.scene.poses.t[-1] >= fs.t_end[-1]
+    assert np.isfinite(result.scene.poses.c2w).all()
