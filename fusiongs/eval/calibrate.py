@@ -73,6 +73,9 @@ class CalibrateOptions:
             time are left out of a pair (0 disables the gate).
         count_power: residual weight ``(N_+ + N_- + 1) ** -count_power`` (0 = plain L1).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
+        iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_sums`).
+        trim: residuals farther than this many robust standard deviations from their pair's
+            median at the starting fit are left out of the IV fit.
         units: residuals in ``"log"`` units, in ``"count"`` units (events), or ``"both"``: the
             geometric mean of the two estimates (:func:`search_both`).
         tile: side in pixels of the bootstrap tiles.
@@ -97,6 +100,7 @@ class CalibrateOptions:
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
+    trim: float = 5.0
     tile: int = 16
     bootstrap: int = 200
     unknown_scale: float = 0.25
@@ -398,7 +402,7 @@ def _solve_iv(sums: torch.Tensor) -> tuple[float, float]:
 
 
 def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOptions,
-                  rng: np.random.Generator, iters: int = 4, trim: float = 5.0) -> dict:
+                  rng: np.random.Generator, iters: int = 4) -> dict:
     """Instrumental-variable estimate of ``(theta_+, theta_-)`` for one channel.
 
     ``log L_j - log L_i = theta_+ N_+ - theta_- N_- + b`` is a regression on event counts that
@@ -415,7 +419,7 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     tp, tn = start
     # Trimmed once, at the starting fit: re-trimming at each new estimate selects on the residual
     # the estimate is made from (measured on tuning scenes: errors up to 29 % instead of 17 %).
-    keep = _inliers(data, log_sharp(data, tp, tn), tp, tn, trim)
+    keep = _inliers(data, log_sharp(data, tp, tn), tp, tn, opts.trim)
     sums = None
     for _ in range(iters):
         sums = _iv_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets)
@@ -600,7 +604,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     return SensorThresholds(names, np.array(out_p), np.array(out_n), np.array(sd_p), np.array(sd_n),
-                            True, "mEDI consistency (ON/OFF per channel, L1)", details)
+                            True, f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
 
 
 def _fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.ndarray:
