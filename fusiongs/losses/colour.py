@@ -92,5 +92,7 @@ def channel_weights_for(
     Returns:
         ``[P, 1]`` weights (float32 on the index's device).
     """
-    w = torch.tensor(weights, dtype=torch.float32, device=channel_index.device)
+    # made on the host and copied without waiting (torch.tensor(..., device=cuda) would wait for
+    # the queued GPU work)
+    w = torch.tensor(weights, dtype=torch.float32, device="cpu").to(channel_index.device, non_blocking=True)
     return w[channel_index][:, None]

@@ -25,6 +25,16 @@ from fusiongs.errors import InputError
 REC601 = (0.299, 0.587, 0.114)
 
 
+def to_grey(linear: torch.Tensor, weights: tuple[float, float, float] = REC601) -> torch.Tensor:
+    """``[..., 1]`` grey ``w . L`` of ``[..., 3]`` linear radiance.
+
+    The weights stay Python numbers: no weight tensor is made on the device per call (a
+    ``torch.tensor(..., device=cuda)`` is a host copy that waits for the queued GPU work).
+    """
+    r, g, b = (float(w) for w in weights)
+    return linear[..., 0:1] * r + linear[..., 1:2] * g + linear[..., 2:3] * b
+
+
 def log_intensity(
     linear: torch.Tensor,
     mode: Literal["grey", "rgb"] = "grey",
@@ -44,8 +54,7 @@ def log_intensity(
     """
     if mode == "grey":
         if linear.shape[-1] == 3:
-            w = torch.tensor(weights, dtype=linear.dtype, device=linear.device)
-            linear = (linear * w).sum(-1, keepdim=True)
+            linear = to_grey(linear, weights)
         elif linear.shape[-1] != 1:
             raise InputError("log_intensity", "linear", "[..., 3] or [..., 1]", tuple(linear.shape))
     elif mode != "rgb":

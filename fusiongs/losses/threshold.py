@@ -15,6 +15,8 @@ Both start at zero, so at initialisation the threshold equals the scalar everywh
 
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -47,7 +49,7 @@ class ContrastThreshold(nn.Module):
         super().__init__()
         if isinstance(init, int | float):
             init = (init, init)
-        s0 = torch.as_tensor(init, dtype=torch.float64)
+        s0 = torch.as_tensor(init, dtype=torch.float64, device="cpu")  # checked on the host, once
         if s0.ndim == 1 and s0.shape == (2,):
             s0 = s0[:, None].expand(2, channels)
         if (channels not in (1, 3) or s0.shape != (2, channels) or not bool(torch.isfinite(s0).all())
@@ -62,8 +64,9 @@ class ContrastThreshold(nn.Module):
         self.register_buffer("log_theta_init", s0)
         self.log_theta = nn.Parameter(s0.clone())  # [2, C]
         self.image_size = image_size
-        self.field = None if grid is None else nn.Parameter(torch.zeros(2, channels, *grid))
-        self.drift = None if not time_knots else nn.Parameter(torch.zeros(time_knots, 2, channels))
+        z = dict(device=s0.device)  # built on the host; move the module with .to(device)
+        self.field = None if grid is None else nn.Parameter(torch.zeros(2, channels, *grid, **z))
+        self.drift = None if not time_knots else nn.Parameter(torch.zeros(time_knots, 2, channels, **z))
         self.time_range = (float(time_range[0]), float(time_range[1]))
 
     @property
@@ -100,6 +103,10 @@ class ContrastThreshold(nn.Module):
     def _drift_at(self, t: float | torch.Tensor) -> torch.Tensor:
         k = self.drift.shape[0]
         t0, t1 = self.time_range
+        if isinstance(t, int | float):  # one instant: knots and weight found on the host
+            u = min(max((float(t) - t0) / (t1 - t0), 0.0), 1.0) * (k - 1)
+            lo = min(math.floor(u), k - 2)
+            return self.drift[lo] * (1 - (u - lo)) + self.drift[lo + 1] * (u - lo)  # [2, C]
         tt = torch.as_tensor(t, dtype=torch.float64, device=self.drift.device)
         u = ((tt - t0) / (t1 - t0)).clamp(0, 1) * (k - 1)
         lo = u.floor().clamp(max=k - 2).long()

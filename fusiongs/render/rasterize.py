@@ -84,7 +84,8 @@ def camera_colors(means: Tensor, colors: Tensor, viewmats: Tensor, sh_degree: in
 def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, colors: Tensor,
               viewmats: Tensor, Ks: Tensor, width: int, height: int, *, sh_degree: int | None = None,
               backgrounds: Tensor | None = None, near_plane: float = 0.01, far_plane: float = 1e10,
-              eps2d: float = 0.3, backend: str = "auto") -> tuple[Tensor, Tensor, RenderMeta]:
+              eps2d: float = 0.3, backend: str = "auto", check_values: bool = True
+              ) -> tuple[Tensor, Tensor, RenderMeta]:
     """Render N 3D Gaussians into C pinhole cameras, differentiably.
 
     Args:
@@ -102,6 +103,9 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
         backend: "torch" (pure torch, CPU or CUDA), "cpu" (numba kernels, CPU tensors), "gsplat"
             (CUDA, needs gsplat 1.5.3) or "auto" (gsplat for CUDA tensors when importable, "cpu"
             for CPU tensors, else "torch").
+        check_values: check that the tensors hold finite values, opacities in [0, 1] and non-zero
+            quaternions; each check reads the values, a host synchronisation on a GPU (the training
+            loop, which renders its own parameters, turns them off).
 
     Returns:
         ``(images [C, H, W, D], alphas [C, H, W, 1], meta)`` with :class:`RenderMeta`.
@@ -111,7 +115,7 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
         MissingDependencyError: backend "gsplat" without gsplat installed.
     """
     C, N, D = check_inputs(means, quats, scales, opacities, colors, viewmats, Ks, width, height,
-                           sh_degree, backgrounds, near_plane, far_plane, backend)
+                           sh_degree, backgrounds, near_plane, far_plane, backend, check_values)
     chosen = _pick_backend(backend, means.device)
     if chosen == "gsplat":
         from fusiongs.render.gsplat_backend import rasterize_gsplat

@@ -174,13 +174,14 @@ class DensifyStrategy:
         r = radii.reshape(grad.shape[0], n, -1)
         w, h = float(_get(meta, "width")), float(_get(meta, "height"))
         scale = float(_get(meta, "n_cameras")) * n_views
-        grad = grad * torch.tensor([w / 2 * scale, h / 2 * scale], device=grad.device)
+        grad = torch.stack([grad[..., 0] * (w / 2 * scale), grad[..., 1] * (h / 2 * scale)], -1)
+        # masked sums over the cameras, not indexing of the visible pairs: no nonzero(), which
+        # would wait for the GPU every step
         visible = (r > 0).all(-1)  # [C, N]
-        cam_ids, gs_ids = visible.nonzero(as_tuple=True)
-        self.grad2d.index_add_(0, gs_ids, grad[cam_ids, gs_ids].norm(dim=-1))
-        self.count.index_add_(0, gs_ids, torch.ones_like(gs_ids, dtype=torch.float32))
-        rad = r[cam_ids, gs_ids].amax(-1).float() / max(w, h)
-        self.max_radii.scatter_reduce_(0, gs_ids, rad, reduce="amax")
+        self.grad2d += (grad.norm(dim=-1) * visible).sum(0)
+        self.count += visible.sum(0)
+        rad = r.amax(-1).float() / max(w, h) * visible
+        self.max_radii = torch.maximum(self.max_radii, rad.amax(0))
 
     @torch.no_grad()
     def _grow(self, model: GaussianModel, optimizers: Optimizers, step: int) -> tuple[int, int]:

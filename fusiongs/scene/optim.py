@@ -8,6 +8,7 @@ its per-element state (Adam's ``exp_avg``, ``exp_avg_sq``, ``max_exp_avg_sq``) e
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import asdict, dataclass
 
@@ -101,6 +102,6 @@ def edit_gaussians(model: GaussianModel, optimizers: Optimizers | None, keep: to
 def reset_opacity(model: GaussianModel, optimizers: Optimizers | None, value: float) -> None:
     """Clamp opacities to at most ``value`` (``logit <= logit(value)``) and zero their Adam state
     (3DGS opacity reset)."""
-    limit = torch.logit(torch.tensor(value, dtype=torch.float64)).item()
+    limit = math.log(value / (1.0 - value))  # logit(value)
     replace_parameters(model, optimizers, lambda _, x: x.clamp_max(limit),
                        lambda _, v: torch.zeros_like(v), names=("opacity_logits",))

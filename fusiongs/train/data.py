@@ -29,6 +29,11 @@ class TrainData:
         cfa_index: ``[H, W]`` int64 CFA channel per pixel (0 R, 1 G, 2 B) for colour events.
         t_range: ``(t0, t1)`` seconds where both events (if any) and the trajectory are defined.
         frame_interval: median spacing of frame mid-times (s), or the range when < 2 frames.
+        event_index: ``[E]`` int32 flat index ``p * H * W + y * W + x`` of every event (p = 0 ON,
+            1 OFF) on the training device, for :meth:`count_maps`; None without events.
+
+    Host and device: ``exposures``, ``hpf_times`` and ``pvc_times`` stay on the host (the step's
+    times are drawn there and moved to the device explicitly); images and maps live on the device.
     """
 
     camera: PinholeCamera
@@ -45,6 +50,7 @@ class TrainData:
     hpf: torch.Tensor | None = None  # [G, H, W, 1] HPF log-intensity images (event-only anchor)
     pvc_times: torch.Tensor | None = None  # [R] float64 s: read-outs of the pvc targets
     pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
+    event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
 
     _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
 
@@ -65,10 +71,30 @@ class TrainData:
         return int(self.targets.shape[0])
 
     def count_maps(self, t_a: float, t_b: float, device: torch.device) -> torch.Tensor:
-        """``[2, H, W]`` float32 counts of (+, −) events with ``t_a <= t < t_b`` (seconds)."""
-        assert self.events is not None
-        c = self.events.count_maps(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
-        return torch.from_numpy(np.ascontiguousarray(c)).to(device=device, dtype=torch.float32)
+        """``[2, H, W]`` float32 counts of (+, −) events with ``t_a <= t < t_b`` (seconds).
+
+        The window's index range comes from a binary search of the host timestamps; the counting
+        is an ``index_add`` on ``event_index``'s device (no host copy, no synchronisation).
+        """
+        if self.events is None:
+            raise RuntimeError("count_maps needs events (TrainData.events is None)")
+        if self.event_index is None:
+            self.event_index = event_indices(self.events, device)
+        i0, i1 = self.events.index_range(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
+        idx = self.event_index[i0:i1]
+        h, w = self.events.height, self.events.width
+        counts = torch.zeros(2 * h * w, dtype=torch.float32, device=idx.device)
+        counts.index_add_(0, idx, torch.ones(idx.shape[0], dtype=torch.float32, device=idx.device))
+        return counts.reshape(2, h, w).to(device)
+
+
+def event_indices(events: EventStream, device: torch.device) -> torch.Tensor:
+    """``[E]`` int32 flat index ``p * H * W + y * W + x`` of each event (p = 0 ON, 1 OFF) on
+    ``device``: what :meth:`TrainData.count_maps` adds up (the layout of
+    :meth:`EventStream.count_maps`)."""
+    hw = events.height * events.width
+    flat = events.y.astype(np.int64) * events.width + events.x + (events.p < 0) * hw
+    return torch.from_numpy(flat.astype(np.int32)).to(device)
 
 
 def coarse_camera(camera: PinholeCamera, factor: int) -> PinholeCamera:
@@ -190,4 +216,5 @@ def prepare_data(scene: Scene, device: torch.device, use_events: bool) -> TrainD
         cfa_index=cfa,
         t_range=(t_lo, t_hi),
         frame_interval=interval,
+        event_index=None if events is None else event_indices(events, device),
     )

@@ -1,6 +1,7 @@
 """Schedules and window sampling: small pure functions of the step (METHOD.md sections 3, 4, 6).
 
-Steps count from 0. Every function is pure; randomness takes an explicit ``torch.Generator``.
+Steps count from 0. Every function is pure; randomness takes an explicit ``torch.Generator``, and
+random draws are made on that generator's device (the CPU without one).
 """
 
 from __future__ import annotations
@@ -10,6 +11,11 @@ import math
 import torch
 
 from fusiongs.errors import InputError
+
+
+def _device(generator: torch.Generator | None) -> torch.device:
+    """Where a draw from ``generator`` is made: its device, the CPU without one."""
+    return torch.device("cpu") if generator is None else generator.device
 
 
 def _ramp(step: int, start: int, ramp: int) -> float:
@@ -79,19 +85,20 @@ def sample_exposure_pairs(
     Args:
         n_instants: N, the number of exposure instants (>= 2).
         n: number of pairs.
-        generator: random generator (CPU).
+        generator: random generator.
 
     Returns:
-        ``[n, 2]`` int64 instant indices, first < second.
+        ``[n, 2]`` int64 instant indices, first < second, on the generator's device.
     """
     if n_instants < 2:
         raise InputError("sample_exposure_pairs", "n_instants", "at least 2", n_instants)
-    pairs = torch.triu_indices(n_instants, n_instants, offset=1).T  # [N(N-1)/2, 2]
+    device = _device(generator)
+    pairs = torch.triu_indices(n_instants, n_instants, offset=1, device=device).T  # [N(N-1)/2, 2]
     m = pairs.shape[0]
     if n <= m:
-        pick = torch.randperm(m, generator=generator)[:n]
+        pick = torch.randperm(m, generator=generator, device=device)[:n]
     else:
-        pick = torch.randint(m, (n,), generator=generator)
+        pick = torch.randint(m, (n,), generator=generator, device=device)
     return pairs[pick]
 
 
@@ -111,18 +118,19 @@ def sample_free_windows(
         n: number of windows.
         t_range: ``(t0, t1)`` seconds covered by events.
         frame_interval: longest duration in seconds (one frame interval).
-        generator: random generator (CPU).
+        generator: random generator.
         min_duration: shortest duration in seconds (1 ms).
 
     Returns:
-        ``[n, 2]`` float64 ``(t_a, t_b)`` in seconds, ``t0 <= t_a < t_b <= t1``.
+        ``[n, 2]`` float64 ``(t_a, t_b)`` in seconds, ``t0 <= t_a < t_b <= t1``, on the
+        generator's device.
     """
     t0, t1 = float(t_range[0]), float(t_range[1])
     if not (t1 > t0 and 0 < min_duration <= frame_interval):
         raise InputError("sample_free_windows", "t_range/frame_interval",
                          "t1 > t0 and 0 < min_duration <= frame_interval",
                          f"{t_range}, {min_duration}, {frame_interval}")
-    u = torch.rand(n, 2, generator=generator, dtype=torch.float64)
+    u = torch.rand(n, 2, generator=generator, dtype=torch.float64, device=_device(generator))
     lo, hi = math.log(min_duration), math.log(frame_interval)
     dur = torch.exp(lo + u[:, 0] * (hi - lo)).clamp(max=t1 - t0)
     start = t0 + u[:, 1] * (t1 - t0 - dur)
@@ -154,7 +162,7 @@ def sample_windows(
         t_range: ``(t0, t1)`` seconds covered by events.
         frame_interval: longest free-window duration in seconds.
         n_instants: N of the blur model.
-        generator: random generator (CPU).
+        generator: random generator (on ``exposures``' device).
         min_duration: shortest free-window duration in seconds.
 
     Returns:
@@ -164,7 +172,7 @@ def sample_windows(
         raise InputError("sample_windows", "exposures/frame", "[F, 2] exposures and 0 <= frame < F",
                          f"{tuple(exposures.shape)}, {frame}")
     s, e = exposures[frame].to(torch.float64)
-    frac = (torch.arange(n_instants, dtype=torch.float64) + 0.5) / n_instants
+    frac = (torch.arange(n_instants, dtype=torch.float64, device=exposures.device) + 0.5) / n_instants
     instants = s + frac * (e - s)  # same rule as losses.blur.exposure_instants
     inside = instants[sample_exposure_pairs(n_instants, n_inside, generator)].reshape(n_inside, 2)
     inside = inside.clamp(float(t_range[0]), float(t_range[1]))

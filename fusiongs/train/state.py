@@ -32,18 +32,26 @@ class FusionState(nn.Module):
         self.model = model
         self.trajectory = trajectory
         self.threshold = threshold
-        self.log_gain = nn.Parameter(torch.zeros(n_frames), requires_grad=learn_gain)
+        self.log_gain = nn.Parameter(torch.zeros(n_frames, device=model.means.device),
+                                     requires_grad=learn_gain)
 
-    def render(self, camera: PinholeCamera, t: torch.Tensor, backend: str = "auto"
-               ) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
-        """Sharp linear renders at instants ``t`` ``[T]`` (s): ``([T, H, W, 3], alphas, meta)``."""
+    def render(self, camera: PinholeCamera, t: torch.Tensor, backend: str = "auto",
+               check_values: bool = True) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
+        """Sharp linear renders at instants ``t`` ``[T]`` (s): ``([T, H, W, 3], alphas, meta)``.
+
+        ``t`` should be on the model's device (a host ``t`` is copied there and waits for the
+        device); ``check_values=False`` skips the rasteriser's value checks (host syncs on a GPU).
+        """
         m = self.model
         device = m.means.device
         viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device=device, dtype=m.means.dtype)
-        Ks = camera.K(dtype=m.means.dtype, device=device).expand(viewmats.shape[0], 3, 3)
+        # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
+        K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
+        Ks = K.expand(viewmats.shape[0], 3, 3)
         colors, alphas, meta = rasterize(m.means, m.rotations, m.scales, m.opacities, m.sh_coeffs(),
                                          viewmats, Ks, camera.width, camera.height,
-                                         sh_degree=m.active_sh_degree, backend=backend)
+                                         sh_degree=m.active_sh_degree, backend=backend,
+                                         check_values=check_values)
         return colors, alphas, meta
 
 
@@ -57,6 +65,9 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
 def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen: torch.Generator,
                       images: torch.Tensor | None = None) -> GaussianModel:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
+
+    Points are drawn on ``gen``'s device and returned on ``c2w``'s (the trainer's ``gen`` is on
+    the CPU so that a run starts from the same Gaussians on every device).
 
     ``init.method = "auto"`` is ``"stereo"`` with two or more images, else ``"random"``.
     ``"stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames, posed by ``c2w``
@@ -86,7 +97,7 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, ini.depth_max,
                                 n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
     n_stereo = min(xyz.shape[0], round(ini.stereo_share * ini.n_points))
-    pick = torch.randperm(xyz.shape[0], generator=gen)[:n_stereo]
+    pick = torch.randperm(xyz.shape[0], generator=gen, device=gen.device)[:n_stereo].to(xyz.device)
     rgb = rgb[pick].clamp(0.0, 1.0)
     if rgb.shape[1] == 1:
         rgb = rgb.expand(-1, 3)
@@ -109,11 +120,13 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         init_images: ``[F, H, W, C]`` linear images for ``init.method = "stereo"``.
     """
     theta_init = cfg.threshold.init if theta_init is None else theta_init
-    gen = torch.Generator().manual_seed(cfg.seed)
+    # on the host on purpose: the same initial Gaussians on every device (drawn points are moved
+    # to the device by initial_gaussians)
+    gen = torch.Generator(device="cpu").manual_seed(cfg.seed)
     if data.n_frames:
         t_init = data.exposures.mean(dim=1)
     else:
-        t_init = torch.linspace(data.t_range[0], data.t_range[1], 16, dtype=torch.float64)
+        t_init = torch.linspace(data.t_range[0], data.t_range[1], 16, dtype=torch.float64, device=device)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
     model = initial_gaussians(data, c2w, cfg, gen, init_images)

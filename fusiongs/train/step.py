@@ -3,11 +3,15 @@
 The N exposure instants of one frame and the instants of the free event windows are rendered in
 one rasteriser call; the blur loss uses the first N renders, the event windows pairs of them
 (E2NeRF) and the free renders.
+
+Host and device: the step's draws (crop, window times, exposure pairs) come from a host generator
+and stay Python numbers; the render instants are copied to the device without waiting, and the
+event pixels are drawn by a generator on the device. Nothing here reads a device value back, so
+a step queues its GPU work without synchronising (the loss terms stay on the device).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 
@@ -22,6 +26,7 @@ from fusiongs.losses.event import (
     event_loss_pvc,
     sample_event_pixels,
     select_channel,
+    to_grey,
 )
 from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
@@ -34,10 +39,15 @@ from fusiongs.train.state import FusionState
 
 @dataclass
 class StepResult:
+    """One step's outputs. ``parts``: detached 0-dim tensors on the render device (``blur``,
+    ``event``, ``edi``, ``intensity``, ``psnr`` of the re-rendered blurry frame), read with
+    ``float()`` only when needed (a host sync on a GPU)."""
+
     loss: torch.Tensor
-    parts: dict[str, float]
+    parts: dict[str, torch.Tensor]
     meta: RenderMeta
     renders: torch.Tensor  # [T, H, W, 3] linear
+    render_seconds: float = 0.0  # host time of the rasteriser call (launch time on a GPU)
 
 
 def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, channels: int,
@@ -48,8 +58,7 @@ def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, 
     """
     mean = exposure_average(linear) * torch.exp(log_gain)
     if channels == 1:
-        w = torch.tensor(grey_weights, dtype=mean.dtype, device=mean.device)
-        mean = (mean * w).sum(-1, keepdim=True)
+        mean = to_grey(mean, grey_weights)
     return apply_response(mean, response)
 
 
@@ -72,14 +81,15 @@ def snap_windows(windows: torch.Tensor, readouts: torch.Tensor) -> torch.Tensor:
 
 def _pvc_target(data: TrainData, t_a: float, t_b: float) -> torch.Tensor:
     """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; METHOD.md §2) from
-    the precomputed read-outs; both ends must be read-out instants."""
+    the precomputed read-outs; both ends must be read-out instants (found on the host)."""
     if data.pvc is None or data.pvc_times is None:
         raise RuntimeError("the pvc loss needs TrainData.pvc (see fusiongs.train.data.pvc_readouts)")
-    t = torch.tensor([t_a, t_b], dtype=torch.float64)
+    t = torch.tensor([t_a, t_b], dtype=torch.float64, device=data.pvc_times.device)
     idx = nearest_readout(data.pvc_times, t)
     if float((data.pvc_times[idx] - t).abs().max()) > 1e-9:
         raise RuntimeError(f"event window [{t_a}, {t_b}) s does not end on pvc read-outs")
-    return data.pvc[idx[1]] - data.pvc[idx[0]]
+    a, b = idx.tolist()
+    return data.pvc[b] - data.pvc[a]
 
 
 def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, lin_a: torch.Tensor,
@@ -88,6 +98,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     """Event loss of one window ``[t_a, t_b)`` from the linear renders ``[h, w, 3]`` at its ends.
 
     Args:
+        gen: generator of the sampled pixels, on the renders' device.
         crop: the part of the sensor that ``lin_a`` / ``lin_b`` show (the whole sensor if None);
             pixels are sampled inside it.
     """
@@ -123,7 +134,8 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
         n_pos, n_neg, d_gt = flat[0], flat[1], flat[2]
         d = delta_log(la, lb, "rgb", eps=ev.log_eps)
         th_p, th_n = th.theta(full_pix, t=t_mid)
-        weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device=device)
+        # made on the host, copied without waiting (torch.tensor(..., device=cuda) would wait)
+        weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device="cpu").to(device, non_blocking=True)
     if ev.loss == "mse":
         return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights)
     if ev.loss == "band":
@@ -155,13 +167,13 @@ def snap_to_readouts(windows: torch.Tensor, readouts: torch.Tensor, t_min: float
 def own_channel(linear: torch.Tensor, data: TrainData, grey_weights) -> torch.Tensor:
     """``[H, W, 1]``: what each event pixel sees of a linear render ``[H, W, 3]``."""
     if data.cfa_index is None:
-        w = torch.tensor(grey_weights, dtype=linear.dtype, device=linear.device)
-        return (linear * w).sum(-1, keepdim=True)
+        return to_grey(linear, grey_weights)
     return linear.gather(-1, data.cfa_index[..., None])
 
 
 def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
-                  lam_ev: float, gen: torch.Generator, it: int = 0, coarse: int = 1) -> StepResult:
+                  lam_ev: float, gen: torch.Generator, it: int = 0, coarse: int = 1, *,
+                  device_gen: torch.Generator | None = None) -> StepResult:
     """Render and compute the losses of one iteration (METHOD.md §3).
 
     With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
@@ -170,6 +182,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
 
     Args:
         frame: index of the frame whose exposure is rendered (ignored without frames).
+        gen: host (CPU) generator of the crop, the event window times and the exposure pairs.
+        device_gen: generator on the state's device for the event pixels; ``gen`` if None (then
+            the state must be on ``gen``'s device).
         lam_ev: event weight now (0 during the warm-up: no event renders are made then, except
             in event-only mode).
         it: the iteration (for the EDI prior's schedule).
@@ -198,7 +213,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
     if has_frames:
         s, e = data.exposures[frame]
         times.append(exposure_instants(s, e, n).to(torch.float64))
-    free = torch.zeros(0, 2, dtype=torch.float64)
+    free = torch.zeros(0, 2, dtype=torch.float64, device=gen.device)
     readout = None
     if use_events and cfg.events.windows_free > 0:
         free = sample_free_windows(cfg.events.windows_free, data.t_range, data.frame_interval, gen,
@@ -210,43 +225,48 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             if readout is not None:
                 readout = nearest_readout(data.hpf_times, free[:, 1])
         times.append(free.reshape(-1))
-    t_all = torch.cat(times)
+    t_host = torch.cat(times)  # [T] float64 s, on the host
+    device = state.model.means.device
     t0 = time.perf_counter()
-    lin, _, meta = state.render(camera, t_all, cfg.backend)
-    parts: dict[str, float] = {"render_s": time.perf_counter() - t0}
+    lin, _, meta = state.render(camera, t_host.to(device, non_blocking=True), cfg.backend,
+                                check_values=False)
+    render_seconds = time.perf_counter() - t0
+    parts: dict[str, torch.Tensor] = {}
     loss = lin.new_zeros(())
     if has_frames:
         pred = predict_blurry(lin[:n], state.log_gain[frame], data.response,
                               targets.shape[-1], cfg.events.grey_weights)
         l_blur = blur_loss(pred[None], targets[frame][None], cfg.blur.ssim_lambda)
         loss = loss + cfg.blur.weight * l_blur
-        parts["blur"] = float(l_blur.detach())
-        mse = float(((pred.detach().clamp(0, 1) - targets[frame]) ** 2).mean())
-        parts["psnr"] = 10.0 * math.log10(1.0 / max(mse, 1e-12))
+        parts["blur"] = l_blur.detach()
+        mse = ((pred.detach().clamp(0, 1) - targets[frame]) ** 2).mean()
+        parts["psnr"] = -10.0 * torch.log10(mse.clamp_min(1e-12))
     lam_edi = edi_prior_weight(cfg, it)
     if has_frames and data.edi is not None and lam_edi > 0 and n % 2 == 1:
         edi = block_mean(data.edi[frame], coarse) if coarse > 1 else crop.images(data.edi[frame])
         l_edi = edi_prior_loss(lin[n // 2], edi)
         loss = loss + lam_edi * l_edi
-        parts["edi"] = float(l_edi.detach())
+        parts["edi"] = l_edi.detach()
     if use_events:
+        t_list = t_host.tolist()
         windows = []
         if has_frames and n >= 2 and cfg.events.windows_inside > 0:
-            pairs = sample_exposure_pairs(n, cfg.events.windows_inside, gen)
-            windows += [(int(j), int(k), float(t_all[j]), float(t_all[k])) for j, k in pairs]
+            pairs = sample_exposure_pairs(n, cfg.events.windows_inside, gen).tolist()
+            windows += [(j, k, t_list[j], t_list[k]) for j, k in pairs]
         base = n if has_frames else 0
-        windows += [(base + 2 * i, base + 2 * i + 1, float(a), float(b))
-                    for i, (a, b) in enumerate(free)]
+        windows += [(base + 2 * i, base + 2 * i + 1, a, b) for i, (a, b) in enumerate(free.tolist())]
+        pixel_gen = gen if device_gen is None else device_gen
         if lam_ev > 0 and windows:
-            l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, gen, crop)
+            l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, pixel_gen, crop)
                        for j, k, ta, tb in windows) / len(windows)
             loss = loss + lam_ev * l_ev
-            parts["event"] = float(l_ev.detach())
+            parts["event"] = l_ev.detach()
         if readout is not None:
+            readout = readout.tolist()
             seen = [own_channel(lin[base + 2 * i + 1], data, cfg.events.grey_weights)
                     for i in range(len(readout))]
-            l_int = sum(intensity_prior_loss(v, data.hpf[int(g)], cfg.events.log_eps)
+            l_int = sum(intensity_prior_loss(v, data.hpf[g], cfg.events.log_eps)
                         for v, g in zip(seen, readout)) / len(readout)
             loss = loss + (1.0 - lam_ev) * l_int
-            parts["intensity"] = float(l_int.detach())
-    return StepResult(loss=loss, parts=parts, meta=meta, renders=lin)
+            parts["intensity"] = l_int.detach()
+    return StepResult(loss=loss, parts=parts, meta=meta, renders=lin, render_seconds=render_seconds)

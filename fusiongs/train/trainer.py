@@ -3,6 +3,10 @@
 Each iteration: pick a frame → schedules (λ_ev, learning rates, θ frozen or not) → render and
 losses (:func:`fusiongs.train.step.training_step`) → backward → densify → optimiser steps →
 history, progress bar and checkpoints.
+
+On a GPU the loop does not wait for the device: the recorded values stay there and are read back
+together every ``FLUSH_EVERY`` iterations and at checkpoints (the only synchronisations, besides
+densification's refinement steps and what the rasteriser does inside).
 """
 
 from __future__ import annotations
@@ -34,10 +38,14 @@ from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState, build_state, scene_extent
 from fusiongs.train.step import training_step
 
+FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
+
 
 @dataclass
 class History:
-    """Per-iteration curves kept for the report (every ``record_every`` iterations)."""
+    """Per-iteration curves kept for the report (one entry per iteration; read back from the
+    device every ``FLUSH_EVERY`` iterations and at checkpoints). ``step_seconds`` and the render /
+    backward times are host times: on a GPU they count kernel launches, not the device's work."""
 
     iteration: list[int] = field(default_factory=list)
     loss: list[float] = field(default_factory=list)
@@ -106,7 +114,8 @@ def build_trajectory(scene: Scene, cfg: DeblurConfig, device: torch.device) -> T
                       knot_spacing=cfg.knot_spacing or None, outside="clamp", device=device)
 
 
-def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator) -> dict[str, Any]:
+def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator,
+             device_gen: torch.Generator) -> dict[str, Any]:
     s = tr.state
     return {
         "iteration": tr.iteration,
@@ -124,6 +133,7 @@ def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Gen
         "optimizers": {k: o.state_dict() for k, o in opts.items()},
         "history": asdict(tr.history),
         "generator": gen.get_state(),
+        "device_generator": {"device": device_gen.device.type, "state": device_gen.get_state()},
     }
 
 
@@ -151,7 +161,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
 
     device = torch.device(cfg.device)
     torch.manual_seed(cfg.seed)
-    gen = torch.Generator().manual_seed(cfg.seed)
+    # `gen` (host) draws what the host needs as numbers: the frame order, event window times,
+    # exposure pairs and crops (the same on every device); `device_gen` draws the event pixels
+    # where the count maps are
+    gen = torch.Generator(device="cpu").manual_seed(cfg.seed)
+    device_gen = torch.Generator(device=device).manual_seed(cfg.seed)
     data = prepare_data(scene, device, cfg.events.enabled)
     theta0 = initial_theta(scene, data, cfg, calibration)
     wants_edi = cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)
@@ -176,6 +190,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         start = int(ckpt["iteration"])
         history = History(**ckpt["history"])
         gen.set_state(ckpt["generator"])
+        saved = ckpt.get("device_generator", {})
+        if saved.get("device") == device_gen.device.type:  # else (another device) freshly seeded
+            device_gen.set_state(saved["state"])
     opts = _optimizers(state, cfg, extent)
     if ckpt is not None:
         for k, o in opts.items():
@@ -183,40 +200,45 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                 o.load_state_dict(ckpt["optimizers"][k])
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
     tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
-    order = torch.randperm(max(data.n_frames, 1), generator=gen)
+    order = torch.randperm(max(data.n_frames, 1), generator=gen, device=gen.device).tolist()
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
                disable=not cfg.output.progress, desc="fusiongs", dynamic_ncols=True)
-    psnr_now = float("nan")
+    psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
+    pending: list[_Pending] = []
     t_begin, seconds_before = time.perf_counter(), history.seconds
 
     def save() -> None:
+        _flush(history, pending, bar)
         history.seconds = seconds_before + time.perf_counter() - t_begin
-        save_checkpoint(ckpt_path, _payload(tr, opts, gen))
+        save_checkpoint(ckpt_path, _payload(tr, opts, gen, device_gen))
         write_history(history, out_dir / "history.jsonl")
 
     try:
         for it in bar:
             t_step = time.perf_counter()
-            frame = int(order[it % len(order)])
+            frame = order[it % len(order)]
             lam_ev = _event_weight(cfg, data, it)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
-            res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev))
+            res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev),
+                                device_gen=device_gen)
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg)
             t_back = time.perf_counter()
             loss.backward()
             history.backward_seconds += time.perf_counter() - t_back
-            history.render_seconds += res.parts["render_s"]
+            history.render_seconds += res.render_seconds
             _optimise(opts, cfg, it)
             if cfg.densify.enabled:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
             history.step_seconds.append(time.perf_counter() - t_step)
-            if "psnr" in res.parts:  # running mean of the blurry-frame PSNR (re-rendered input)
+            if "psnr" in res.parts:
                 p = res.parts["psnr"]
-                psnr_now = p if math.isnan(psnr_now) else 0.9 * psnr_now + 0.1 * p
-            _record(history, it, float(loss.detach()), res.parts, state, lam_ev, psnr_now)
-            bar.set_postfix(loss=f"{float(loss.detach()):.4f}", psnr=f"{psnr_now:.2f}", n=state.model.n)
+                psnr_now = p if psnr_now is None else 0.9 * psnr_now + 0.1 * p
+            pending.append(_Pending(it, _row(loss.detach(), res.parts, state, psnr_now), state.model.n,
+                                    lam_ev))
+            if (it + 1) % FLUSH_EVERY == 0:
+                _flush(history, pending, bar)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
                 save()
@@ -231,12 +253,13 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
                      ) -> tuple[torch.Tensor, torch.Tensor]:
     """The ``pvc`` targets' read-outs: every exposure instant, the event-only anchor instants and a
     grid of ``events.min_window`` spacing (at most 2000 steps over the stream)."""
-    instants = [exposure_instants(s, e, cfg.blur.n_samples).numpy() for s, e in data.exposures.tolist()]
+    instants = [exposure_instants(data.exposures[:, 0], data.exposures[:, 1], cfg.blur.n_samples)
+                .reshape(-1).numpy()]  # host tensors
     if data.hpf_times is not None:
         instants.append(data.hpf_times.numpy())
     span = data.t_range[1] - data.t_range[0]
     spacing = max(cfg.events.min_window, span / 2000)
-    flat = np.concatenate(instants) if instants else np.zeros(0)
+    flat = np.concatenate(instants)
     return pvc_readouts(data.events, flat, data.t_range, spacing, cfg.events.hpf_tau,
                         cfg.threshold.init, device)
 
@@ -320,20 +343,52 @@ def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int
         opt.zero_grad(set_to_none=True)
 
 
-def _record(h: History, it: int, loss: float, parts: dict[str, float], state: FusionState,
-            event_weight: float = math.nan, psnr_input: float = math.nan) -> None:
-    h.iteration.append(it)
-    h.event_weight.append(float(event_weight))
-    h.psnr_input.append(float(psnr_input))
-    h.loss.append(loss)
-    h.blur.append(parts.get("blur", math.nan))
-    h.event.append(parts.get("event", math.nan))
-    h.edi.append(parts.get("edi", math.nan))
+@dataclass
+class _Pending:
+    """An iteration recorded but not yet read back: ``row`` from :func:`_row`, on the device."""
+
+    iteration: int
+    row: torch.Tensor
+    n_gaussians: int
+    event_weight: float
+
+
+def _row(loss: torch.Tensor, parts: dict[str, torch.Tensor], state: FusionState,
+         psnr: torch.Tensor | None) -> torch.Tensor:
+    """``[5 + 2C]`` float32 on the device: loss, blur, event and EDI terms (NaN when off), running
+    PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
+    nan = loss.new_full((), math.nan, dtype=torch.float32)
+    terms = [loss, parts.get("blur", nan), parts.get("event", nan), parts.get("edi", nan),
+             nan if psnr is None else psnr]
     with torch.no_grad():
         tp, tn = state.threshold.scalar()
-    h.theta_pos.append([float(v) for v in tp.reshape(-1)])
-    h.theta_neg.append([float(v) for v in tn.reshape(-1)])
-    h.n_gaussians.append(state.model.n)
+    return torch.cat([torch.stack([t.float() for t in terms]), tp.reshape(-1).float(),
+                      tn.reshape(-1).float()])
+
+
+def _flush(h: History, pending: list[_Pending], bar) -> None:
+    """Read the pending rows back from the device at once (one sync) into ``h``; update ``bar``.
+
+    Raises:
+        InputError: a recorded loss is NaN or infinite (the training diverged; the rasteriser's own
+            value checks are off in the loop).
+    """
+    if not pending:
+        return
+    for p, v in zip(pending, torch.stack([p.row for p in pending]).tolist()):
+        for name, x in zip(("loss", "blur", "event", "edi", "psnr_input"), v):
+            getattr(h, name).append(x)
+        c = (len(v) - 5) // 2
+        h.theta_pos.append(v[5:5 + c])
+        h.theta_neg.append(v[5 + c:])
+        h.iteration.append(p.iteration)
+        h.n_gaussians.append(p.n_gaussians)
+        h.event_weight.append(float(p.event_weight))
+        if not math.isfinite(v[0]):
+            raise InputError("training", "loss", "finite values (the training diverged: lower the "
+                             "learning rates?)", f"{v[0]} at iteration {p.iteration}")
+    pending.clear()
+    bar.set_postfix(loss=f"{h.loss[-1]:.4f}", psnr=f"{h.psnr_input[-1]:.2f}", n=h.n_gaussians[-1])
 
 
 HISTORY_KEYS = ("iteration", "loss", "blur", "event", "edi", "event_weight", "theta_pos", "theta_neg",
