@@ -16,6 +16,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
     p.add_argument("--calibration", default=None, metavar="FILE",
                    help="calibration.json from `fusiongs calibrate` (default: estimate the same way)")
+    p.add_argument("--holdout", default=None, metavar="K",
+                   help="leave every K-th frame out of training (frames i with i %% K == K-1, never the "
+                        "first or last) and score the predictions of those frames against the real ones "
+                        "(OUT/heldout.json); K >= 2, 0 = off (default)")
     p.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. optim.iterations=500 events.loss=band")
 
@@ -24,5 +28,5 @@ def run(args: argparse.Namespace) -> int:
     from fusiongs.train.pipeline import run_deblur
 
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
-               calibration=args.calibration)
+               calibration=args.calibration, holdout=args.holdout)
     return 0

@@ -1,4 +1,5 @@
-"""The run report: metrics tables, loss curves and picture strips drawn with OpenCV into one PNG."""
+"""The run report: metrics tables, loss curves and picture strips drawn with OpenCV into one PNG
+(with or without truth images)."""
 
 from __future__ import annotations
 
@@ -103,18 +104,43 @@ def side_by_side(parts: Sequence[np.ndarray]) -> np.ndarray:
     return np.concatenate(padded, axis=1)
 
 
+def metric_rows(result: Mapping) -> list[list[str]]:
+    """Rows of the report's table: truth metrics (when ``result`` has them), held-out PSNR and
+    no-reference sharpness (when present)."""
+    rows = []
+    tables = [("", result)] + ([(" (affine fit)", result["affine_fit"])] if "affine_fit" in result else [])
+    if "mean" in result:
+        rows.append(["views", "method", "n", "PSNR", "SSIM"])
+        for suffix, res in tables:
+            for g, by in res["mean"].items():
+                for method, m in by.items():
+                    rows.append([g, method + suffix, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
+    if result.get("heldout"):
+        rows.append(["held-out", "method", "n", "PSNR vs frame", ""])
+        for method, m in result["heldout"]["mean"].items():
+            v = "-" if m["psnr"] is None else f"{m['psnr']:.2f}"
+            rows.append([f"held-out K={result['heldout']['holdout']}", method, str(m["n"]), v, ""])
+    if result.get("sharpness"):
+        rows.append(["no reference", "method", "n", "Tenengrad", ""])
+        for method, m in result["sharpness"].items():
+            rows.append(["sharpness", method, str(m["n"]), f"{m['tenengrad']:.4g}", ""])
+    return rows
+
+
 def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[str, np.ndarray]],
-                 gt: Mapping[str, np.ndarray], max_strips: int = 4) -> None:
-    """``report.png``: mean table, loss / θ curves and picture strips (methods | truth)."""
+                 gt: Mapping[str, np.ndarray], max_strips: int = 4,
+                 heldout: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> None:
+    """``report.png``: tables, loss / θ curves and picture strips.
+
+    With truth (``gt`` not empty) each strip is ``methods | truth``; without, the first
+    ``max_strips`` deblurred frames as ``blurry | edi | fusiongs``. ``heldout``
+    (``{frame: {column: image}}``, display values in [0, 1]) adds one strip per held-out frame:
+    the predictions beside the real frame.
+    """
     from fusiongs.eval.metrics import affine_fit
     from fusiongs.frames.image_io import write_png
 
-    rows = [["views", "method", "n", "PSNR", "SSIM"]]
-    tables = [("", result)] + ([(" (affine fit)", result["affine_fit"])] if "affine_fit" in result else [])
-    for suffix, res in tables:
-        for g, by in res["mean"].items():
-            for method, m in by.items():
-                rows.append([g, method + suffix, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
+    rows = metric_rows(result)
     its = history.iteration
     loss = line_plot({"loss": list(zip(its, history.loss))}, "loss", log_y=True)
     th = {}
@@ -124,14 +150,25 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
             th[f"theta+{c}"] = list(zip(its, tp[:, c]))
             th[f"theta-{c}"] = list(zip(its, tn[:, c]))
     theta = line_plot(th, "contrast threshold")
-    views = [n for n in sorted(gt) if n.startswith("deblur_")][:max_strips]
-    views += [n for n in sorted(gt) if n.startswith("novel_")][: max(1, max_strips // 2)]
     strips = []
-    for name in views:
-        cols = {f"{m} {name}": imgs[name] for m, imgs in methods.items() if name in imgs}
-        if "affine_fit" in result and name in methods.get("fusiongs", {}):
-            cols["affine fit"] = affine_fit(methods["fusiongs"][name], gt[name])
-        cols["truth"] = gt[name]
-        strips.append(picture_strip(cols))
-    parts = [table_image(rows, 520), side_by_side([loss, theta])] + strips
+    if gt:
+        views = [n for n in sorted(gt) if n.startswith("deblur_")][:max_strips]
+        views += [n for n in sorted(gt) if n.startswith("novel_")][: max(1, max_strips // 2)]
+        for name in views:
+            cols = {f"{m} {name}": imgs[name] for m, imgs in methods.items() if name in imgs}
+            if "affine_fit" in result and name in methods.get("fusiongs", {}):
+                cols["affine fit"] = affine_fit(methods["fusiongs"][name], gt[name])
+            cols["truth"] = gt[name]
+            strips.append(picture_strip(cols))
+    else:
+        ours = methods.get("fusiongs", {})
+        for name in [n for n in sorted(ours) if n.startswith("deblur_")][:max_strips]:
+            order = ["blurry", "edi"] + [m for m in methods if m not in ("blurry", "edi", "fusiongs")]
+            cols = {f"{m} {name}": methods[m][name] for m in order if name in methods.get(m, {})}
+            cols[f"fusiongs {name}"] = ours[name]
+            strips.append(picture_strip(cols))
+    for name, cols in list((heldout or {}).items())[:max_strips]:
+        strips.append(picture_strip({f"{c} {name}" if i == 0 else c: img
+                                     for i, (c, img) in enumerate(cols.items())}))
+    parts = ([table_image(rows, 520)] if rows else []) + [side_by_side([loss, theta])] + strips
     write_png(path, stack_rows(parts).astype(np.float32) / 255.0)

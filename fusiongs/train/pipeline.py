@@ -1,7 +1,9 @@
-"""``fusiongs deblur`` as a function: load → train → write outputs → evaluate against truth."""
+"""``fusiongs deblur`` as a function: load → train → write outputs → evaluate (against truth when
+the scene has it; held-out frames and sharpness without)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,6 +12,7 @@ import numpy as np
 
 from fusiongs.atomic import write_text
 from fusiongs.eval.evaluate import compare_methods, format_table
+from fusiongs.eval.holdout import format_heldout, frame_subset, holdout_indices, parse_holdout
 from fusiongs.frames.response import linear_to_srgb
 from fusiongs.io.scene import Scene
 from fusiongs.io.scene_io import load_scene
@@ -20,6 +23,8 @@ from fusiongs.train.trainer import Trained, train
 EVENT_ONLY_NOTE = ("event-only reconstruction: events fix log-intensity changes, not absolute "
                    "brightness or colour balance; renders are defined up to a per-channel scale and "
                    "offset, so metrics are also given after a per-channel affine fit")
+NO_TRUTH_NOTE = ("no truth images (gt/): held-out frames (--holdout) and no-reference sharpness "
+                 "(Tenengrad: rises with edges and with noise) only")
 
 
 def resolve_config(config: str | Path | None, overrides: Sequence[str]) -> DeblurConfig:
@@ -61,8 +66,14 @@ def baseline_images(scene: Scene, thresholds=None) -> dict[str, dict[str, np.nda
 
 
 def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], out: Path,
-                     gt_dir: Path) -> dict | None:
-    """metrics.json and report.png when truth exists; returns the metrics (or None)."""
+                     gt_dir: Path | None, heldout: tuple[dict, dict] | None = None) -> dict:
+    """metrics.json and report.png; returns the metrics.
+
+    Against truth when ``gt_dir`` holds images named like the outputs; always the no-reference
+    sharpness of the deblurred frames (:func:`fusiongs.eval.holdout.compare_sharpness`) and, with
+    ``heldout`` (from :func:`score_holdout`), the held-out scores and pictures.
+    """
+    from fusiongs.eval.holdout import compare_sharpness
     from fusiongs.eval.report import write_report
     from fusiongs.train.outputs import read_gt
 
@@ -70,28 +81,132 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     for k, v in images.items():
         if k.startswith("deblur/"):
             ours.setdefault(f"deblur_{k.split('/', 1)[1]}", v)
-    gt = read_gt(gt_dir, ours.keys())
-    if not gt:
-        return None
+    gt = read_gt(gt_dir, ours.keys()) if gt_dir is not None and gt_dir.is_dir() else {}
     methods = {"fusiongs": ours, **baseline_images(scene, tr.initial_thresholds)}
-    result = compare_methods(methods, gt)
-    if len(scene.frames) == 0:  # event-only: brightness and colour balance are not observable
-        result["affine_fit"] = compare_methods(methods, gt, affine=True)
-        result["note"] = EVENT_ONLY_NOTE
+    if gt:
+        result = compare_methods(methods, gt)
+        if len(scene.frames) == 0:  # event-only: brightness and colour balance are not observable
+            result["affine_fit"] = compare_methods(methods, gt, affine=True)
+            result["note"] = EVENT_ONLY_NOTE
+    else:
+        result = {"note": NO_TRUTH_NOTE}
+    sharp = compare_sharpness(methods)
+    if sharp:
+        result["sharpness"] = sharp
+    if heldout is not None:
+        result["heldout"] = heldout[0]
     result["seconds"] = tr.history.seconds
     result["render_seconds"] = tr.history.render_seconds
     result["backward_seconds"] = tr.history.backward_seconds
     result["iterations"] = tr.iteration
     result["n_gaussians"] = tr.state.model.n
     write_text(out / "metrics.json", json.dumps(result, indent=2) + "\n")
-    write_report(out / "report.png", result, tr.history, methods, gt)
+    write_report(out / "report.png", result, tr.history, methods, gt,
+                 heldout=heldout[1] if heldout is not None else None)
     return result
+
+
+def split_holdout(scene: Scene, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(held, kept)`` frame indices for ``--holdout k`` (rule: :mod:`fusiongs.eval.holdout`).
+
+    Raises:
+        InputError: ``k >= 2`` leaves no frame out (fewer than 3 frames, or K too large).
+    """
+    from fusiongs.errors import InputError
+
+    n = len(scene.frames)
+    held = holdout_indices(n, k)
+    if k and not held.size:
+        raise InputError("--holdout", "K", f"a period that leaves a frame out of the {n} frames "
+                         "(the first and last are always kept: K <= number of frames - 1)", k)
+    return held, np.setdiff1d(np.arange(n), held)
+
+
+def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray, k: int
+                  ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
+    """Predict each held-out blurry frame three ways and score it against the real one (METHOD §6a).
+
+    Args:
+        tr: the run, trained on the frames ``kept`` of ``scene``.
+        scene: every frame (with the run's camera and trajectory).
+        held, kept: frame indices from :func:`split_holdout`.
+        k: the ``--holdout`` period (recorded).
+
+    Returns:
+        ``(document, pictures)``: the ``heldout.json`` document (per frame the PSNR of
+        ``fusiongs``, ``nearest`` and ``edi_carried`` on 8-bit values in the frames' own encoding,
+        plus the means), and per frame ``{column: sRGB image}`` for the report. fusiongs uses the
+        mean gain ``g`` of the kept frames (1 when gains are not learned); EDI-carried uses the
+        run's starting thresholds (``calibration.json``) and is ``None`` without events.
+    """
+    import torch
+
+    from fusiongs.eval.edi import edi_deblur
+    from fusiongs.eval.holdout import (
+        METHODS,
+        RULE,
+        carried_exposure,
+        heldout_summary,
+        kept_neighbours,
+        nearest_kept,
+    )
+    from fusiongs.eval.metrics import psnr
+    from fusiongs.frames.response import linear_to_response, response_to_linear
+    from fusiongs.losses.blur import exposure_instants
+    from fusiongs.train.step import predict_blurry
+
+    fs, cfg, state = scene.frames, tr.config, tr.state
+    n, lin, mids = cfg.blur.n_samples, fs.to_linear(), fs.mid_times()
+    events = scene.events if scene.events is not None and len(scene.events) else None
+    theta = tr.initial_thresholds
+    if events is not None and theta is None:
+        from fusiongs.eval.calibrate import estimate_thresholds
+
+        theta = estimate_thresholds(frame_subset(fs, kept), events)
+    device = state.model.means.device
+    with torch.no_grad():
+        gains = state.log_gain.detach().exp()
+        gain = float(gains.mean()) if gains.numel() else 1.0
+    log_g = torch.tensor(np.log(gain), dtype=torch.float32, device=device)
+
+    def display(encoded: np.ndarray) -> np.ndarray:
+        out = linear_to_srgb(np.clip(response_to_linear(np.asarray(encoded, np.float64), fs.response), 0, 1))
+        return np.asarray(out, np.float32)
+
+    edi: dict[int, np.ndarray] = {}
+    frames, pictures = {}, {}
+    for i in (int(v) for v in held):
+        s, e, name = float(fs.t_start[i]), float(fs.t_end[i]), fs.names[i]
+        with torch.no_grad():
+            renders, _, _ = state.render(scene.camera, exposure_instants(s, e, n).to(device), cfg.backend)
+            ours = predict_blurry(renders, log_g, fs.response, fs.images.shape[-1], cfg.events.grey_weights)
+        near = nearest_kept(mids, kept, i)
+        preds = {"fusiongs": ours.cpu().numpy(), "nearest": fs.images[near], "edi_carried": None}
+        sides = [j for j in kept_neighbours(kept, i) if j is not None]
+        if events is not None:
+            carried = []
+            for j in sides:
+                if j not in edi:
+                    edi[j] = edi_deblur(lin[j], events, float(fs.t_start[j]), float(fs.t_end[j]), theta)
+                carried.append(carried_exposure(edi[j], events, float(mids[j]), s, e, n, theta))
+            preds["edi_carried"] = linear_to_response(np.clip(np.mean(carried, axis=0), 0, 1), fs.response)
+        real = fs.images[i]
+        frames[name] = {m: (psnr(p, real) if p is not None else None) for m, p in preds.items()}
+        frames[name] |= {"nearest_frame": fs.names[near], "neighbours": [fs.names[j] for j in sides]}
+        pictures[name] = {m: display(p) for m, p in preds.items() if p is not None} | {"real": display(real)}
+    doc = {"holdout": k, "rule": RULE, "methods": list(METHODS), "n_samples": n, "gain": gain,
+           "psnr": "8-bit values in the frames' own encoding", "frames": frames,
+           "mean": heldout_summary(frames)}
+    return doc, pictures
 
 
 def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | None = None,
                overrides: Sequence[str] = (), resume: bool = False, log=print,
-               calibration: str | Path | None = None) -> dict | None:
-    """Fit, write every output of ``fusiongs deblur`` into ``out``, and evaluate when truth exists.
+               calibration: str | Path | None = None, holdout: int | str | None = None) -> dict:
+    """Fit, write every output of ``fusiongs deblur`` into ``out``, and evaluate.
+
+    Returns the metrics (``metrics.json``): against truth when the scene has ``gt/``, else held-out
+    and sharpness figures only.
 
     ``calibration``: a ``calibration.json`` from ``fusiongs calibrate`` (the starting thresholds);
     without it they are estimated the same way. Either way they are written to
@@ -100,19 +215,27 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     A scene without trajectory or intrinsics first goes through the pose stage
     (:func:`fusiongs.train.poses_stage.run_pose_stage`: EDI images registered by pycolmap), which
     writes ``out/trajectory.txt`` and ``out/camera.json``.
+
+    ``holdout = K`` (``--holdout``; 0 or None = off) trains without every K-th frame
+    (:mod:`fusiongs.eval.holdout`), then predicts them and writes ``out/heldout.json``; the other
+    outputs (deblurred frames, metrics) still cover every frame.
     """
     from fusiongs.events.thresholds import read_calibration, write_calibration
     from fusiongs.train.outputs import write_outputs
     from fusiongs.train.poses_stage import needs_pose_stage, run_pose_stage
 
+    k = parse_holdout(holdout)
     cfg = resolve_config(config, overrides)
     calib = read_calibration(calibration)[0] if calibration is not None else None
     scene = load_scene(scene_path)
+    held, kept = split_holdout(scene, k)
+    fit_scene = dataclasses.replace(scene, frames=frame_subset(scene.frames, kept)) if held.size else scene
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if needs_pose_stage(scene):  # no trajectory or no intrinsics: EDI + pycolmap first
-        scene, calib = run_pose_stage(scene, cfg, out, calib, resume=resume, log=log)
-    tr = train(scene, cfg, out, resume=resume, calibration=calib)
+    if needs_pose_stage(fit_scene):  # no trajectory or no intrinsics: EDI + pycolmap first
+        fit_scene, calib = run_pose_stage(fit_scene, cfg, out, calib, resume=resume, log=log)
+    tr = train(fit_scene, cfg, out, resume=resume, calibration=calib)
+    scene = dataclasses.replace(fit_scene, frames=scene.frames)  # every frame, the run's camera/poses
     if tr.initial_thresholds is not None:
         write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))
     if len(scene.frames) == 0:
@@ -123,13 +246,18 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "
         f"render forward {h.render_seconds / max(h.seconds, 1e-9):.0%}, backward "
         f"{h.backward_seconds / max(h.seconds, 1e-9):.0%}), {tr.state.model.n} Gaussians")
-    result = None
-    if scene.root is not None and (scene.root / "gt").is_dir():
-        result = evaluate_outputs(tr, scene, images, out, scene.root / "gt")
-        if result is not None:
-            log(format_table(result))
-            if "affine_fit" in result:
-                log("after a per-channel affine fit (EventNeRF's protocol):")
-                log(format_table(result["affine_fit"]))
+    heldout = score_holdout(tr, scene, held, kept, k) if held.size else None
+    if heldout is not None:
+        write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")
+        log(format_heldout(heldout[0]))
+    result = evaluate_outputs(tr, scene, images, out, scene.root / "gt" if scene.root else None, heldout)
+    if "mean" in result:
+        log(format_table(result))
+        if "affine_fit" in result:
+            log("after a per-channel affine fit (EventNeRF's protocol):")
+            log(format_table(result["affine_fit"]))
+    if "sharpness" in result:
+        log("sharpness of the deblurred frames (Tenengrad, no reference): " + ", ".join(
+            f"{m} {v['tenengrad']:.4g}" for m, v in result["sharpness"].items()))
     log(f"outputs in {out}")
     return result

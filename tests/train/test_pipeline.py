@@ -146,3 +146,50 @@ def test_corrupt_checkpoint_is_named(tmp_path, capsys):
     (tmp_path / "checkpoint.pt").write_bytes(b"not a checkpoint")
     assert main(["render", str(tmp_path), "--t", "0.1"]) == 2
     assert "checkpoint.pt" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def three_frames_no_truth(tmp_path_factory):
+    """Three blurry frames with events and a trajectory, but no gt/ (as a real recording)."""
+    import shutil
+
+    root = tmp_path_factory.mktemp("scene3")
+    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.15, frames=3, exposure=0.03,
+                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    shutil.rmtree(root / "gt")
+    return root
+
+
+def test_holdout_without_truth_scores_held_out_frames_and_writes_report(three_frames_no_truth, tmp_path,
+                                                                        capsys):
+    out = tmp_path / "run"
+    assert main(["deblur", str(three_frames_no_truth), "-o", str(out), "--holdout", "2", *TINY]) == 0
+    log = capsys.readouterr().out
+    assert "held-out frames" in log and "edi_carried" in log and "Tenengrad" in log
+    doc = json.loads((out / "heldout.json").read_text())
+    assert doc["holdout"] == 2 and list(doc["frames"]) == ["000001"]  # frame 1 of 0..2: i % 2 == 1
+    row = doc["frames"]["000001"]
+    assert row["nearest_frame"] == "000000" and row["neighbours"] == ["000000", "000002"]
+    for m in ("fusiongs", "nearest", "edi_carried"):
+        assert np.isfinite(row[m]) and row[m] > 5 and doc["mean"][m] == {"psnr": row[m], "n": 1}
+    assert row["edi_carried"] > row["nearest"]  # events carry the neighbours across the motion
+    # trained on the two kept frames; outputs still cover every frame
+    assert load_checkpoint(out / "checkpoint.pt")["log_gain"].numel() == 2
+    assert sorted(p.stem for p in (out / "deblurred").glob("*.png")) == ["000000", "000001", "000002"]
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert "mean" not in metrics and "gt/" in metrics["note"]
+    assert metrics["heldout"]["mean"] == doc["mean"]
+    assert set(metrics["sharpness"]) == {"fusiongs", "blurry", "edi"}
+    assert all(v["n"] == 3 and v["tenengrad"] > 0 for v in metrics["sharpness"].values())
+    assert read_image(out / "report.png").shape[1] > 100
+
+
+@pytest.mark.parametrize("k, expected", [("1", "integer >= 2"), ("x", "integer >= 2"),
+                                         ("3", "first and last are always kept")])
+def test_bad_holdout_is_one_line_and_exit_2(three_frames_no_truth, tmp_path, capsys, k, expected):
+    assert main(["deblur", str(three_frames_no_truth), "-o", str(tmp_path), "--holdout", k, *TINY]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--holdout" in err[0] and expected in err[0]
+    assert not (tmp_path / "checkpoint.pt").exists()
