@@ -9,7 +9,7 @@ HELP = "fit a 3DGS scene and trajectory to blurry frames and events; write sharp
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("scene", help="scene folder (scene.json; see FORMAT.md)")
-    p.add_argument("-o", "--output", "--out", dest="out", required=True, help="output folder")
+    p.add_argument("-o", "--output", "--out", dest="out", default=None, help="output folder (required)")
     p.add_argument("--config", default=None,
                    help="YAML config: a path or a preset name (deblur, deblur_fast, deblur_quality, "
                         "event_only); default: the built-in defaults = deblur")
@@ -20,13 +20,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="leave every K-th frame out of training (frames i with i %% K == K-1, never the "
                         "first or last) and score the predictions of those frames against the real ones "
                         "(OUT/heldout.json); K >= 2, 0 = off (default)")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the merged config (defaults, --config, overrides) as YAML and exit")
     p.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. optim.iterations=500 events.loss=band")
 
 
 def run(args: argparse.Namespace) -> int:
-    from fusiongs.train.pipeline import run_deblur
+    from fusiongs.errors import InputError
+    from fusiongs.train.pipeline import resolve_config, run_deblur
 
+    if args.print_config:
+        from fusiongs.train.config import to_yaml
+
+        print(to_yaml(resolve_config(args.config, args.overrides)), end="")
+        return 0
+    if args.out is None:
+        raise InputError("command line", "-o/--output", "an output folder")
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
                calibration=args.calibration, holdout=args.holdout)
     return 0

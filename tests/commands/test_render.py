@@ -29,3 +29,16 @@ def test_every_verb_spells_the_output_option_the_same():
         opts = {s for a in p._actions for s in a.option_strings}
         if "-o" in opts:
             assert "--output" in opts, verb
+
+
+def test_deblur_print_config_shows_the_merged_config(capsys):
+    import yaml
+
+    from fusiongs.cli import main
+
+    assert main(["deblur", "scene-not-read", "--config", "deblur_fast", "--print-config",
+                 "optim.iterations=7"]) == 0
+    doc = yaml.safe_load(capsys.readouterr().out)
+    assert doc["optim"]["iterations"] == 7  # the override
+    assert doc["densify"]["max_gaussians"] == 10000  # from the deblur_fast preset
+    assert main(["deblur", "scene-not-read"]) == 2  # no -o and no --print-config
