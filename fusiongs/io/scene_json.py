@@ -145,7 +145,7 @@ def parse_scene_dict(doc: object, where: str = "scene.json") -> SceneSpec:
             absent give an :class:`~fusiongs.camera.pinhole.UncalibratedCamera`), ``events.path``,
             ``frames[i].path``, ``t_start``, ``t_end``, ``renders[i].name``/``t``), a wrong type,
             ``t_end <= t_start``, frames out of time order or with overlapping exposures, an unknown
-            CFA or response, a CFA with an odd camera width or height, duplicate render names, or a
+            CFA or response, duplicate render names, or a
             non-zero lens distortion (not supported yet: frames and events must be undistorted
             first).
     """
