@@ -24,10 +24,10 @@ from tests.conftest import real_data_dir
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOKS = sorted((REPO_ROOT / "notebooks").glob("[0-9]*.py"))
-# (notebook, real recordings visible?): notebook 03 converts a real recording when one is found and
-# a simulated substitute otherwise; where the recordings exist, both paths are run.
+# (notebook, real recordings visible?): notebook 03 runs on the real eslnet_cups recording when it is
+# found and on a simulated substitute otherwise; where the recording exists, both paths are run.
 CASES = [pytest.param(p, True, id=p.stem) for p in NOTEBOOKS]
-if (real_data_dir() / "davis346_mono.aedat4").is_file():
+if (real_data_dir() / "eslnet_cups" / "scene.json").is_file():
     CASES += [pytest.param(p, False, id=f"{p.stem}-no-recording") for p in NOTEBOOKS
               if p.stem.startswith("03_")]
 
