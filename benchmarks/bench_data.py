@@ -2,14 +2,22 @@
 Prophesee ``.raw`` reader (faery) against the former numpy decoder, in time and peak memory.
 
 Run: ``PYTHONPATH=. python benchmarks/bench_data.py [--n 10000000] [--repeat 3] [--raw FILE]
-[--no-synthetic]``. Prints one row per case: best-of-``repeat`` seconds, the target, and a reference
-measured in the same run (plain h5py reads without validation; ``np.loadtxt`` timed on 1/20 of the
-lines and scaled up). Cases are a list: add one by appending a :class:`Case`.
+[--no-synthetic]`` or ``... --evt3-large [N] [--tmp DIR]``. Prints one row per case: best-of-``repeat``
+seconds, the target, and a reference measured in the same run (plain h5py reads without validation;
+``np.loadtxt`` timed on 1/20 of the lines and scaled up). Cases are a list: add one by appending a
+:class:`Case`.
 
 The ``.raw`` table (default file: the EVT3 recording of ``../shared/data/real``, when present) runs
 each reader in its own process: best-of-``repeat`` seconds, and the peak resident memory
 (``ru_maxrss``) above the process's level after its imports, next to the size of the returned
 stream's arrays.
+
+``--evt3-large [N]`` (default N = 1e8; only this table) writes a synthetic EVT 3.0 file of N events
+chunk by chunk (:func:`write_evt3`, bounded memory) into a temporary folder (``--tmp``, removed
+afterwards), decodes it with fusiongs' reader in a fresh process, and prints the file size, the
+seconds, the child's peak RSS (its ``VmHWM``: ``RUSAGE_CHILDREN``'s ``ru_maxrss`` also counts this
+process's memory at the spawn) against the 13 bytes/event of the output arrays, and whether the
+decoded values' sums equal the written ones.
 """
 
 from __future__ import annotations
@@ -18,11 +26,12 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -172,9 +181,158 @@ def raw_table(path: Path, repeat: int) -> None:
               f"{r['out_bytes'] / 2**20:.1f} MiB |")
 
 
+# ---------------------------------------------------------------- synthetic EVT 3.0, large
+EVT3_SIZE = (1280, 720)  # an IMX636 (EVK4) sensor
+EVT3_CHUNK = 1 << 21     # events generated and encoded at once (~150 MiB of working memory)
+
+
+def synthetic_evt3_chunks(n: int, width: int = EVT3_SIZE[0], height: int = EVT3_SIZE[1],
+                          mean_dt_us: float = 1.0, seed: int = 0, chunk: int = EVT3_CHUNK
+                          ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """``n`` random events as ``(t int64 µs, x uint16, y uint16, p uint8 1=ON/0=OFF)`` chunks.
+
+    Time steps are uniform integers in ``[0, 2 mean_dt_us]`` (equal times happen; 1e8 events at the
+    default 1 µs span 100 s, several 16.8 s wraps of EVT 3.0's 24-bit clock); each chunk has its own
+    generator (``[seed, index]``), so the stream is the same whatever reads it.
+    """
+    t_last = 0
+    for i, start in enumerate(range(0, n, chunk)):
+        m = min(chunk, n - start)
+        rng = np.random.default_rng([seed, i])
+        t = t_last + np.cumsum(rng.integers(0, int(round(2 * mean_dt_us)) + 1, m), dtype=np.int64)
+        x = rng.integers(0, width, m, dtype=np.uint16)
+        y = rng.integers(0, height, m, dtype=np.uint16)
+        p = rng.integers(0, 2, m, dtype=np.uint8)
+        t_last = int(t[-1])
+        yield t, x, y, p
+
+
+def evt3_words(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, prev: tuple[int, int]
+               ) -> tuple[np.ndarray, tuple[int, int]]:
+    """Encode events as EVT 3.0 words (Prophesee's "EVT 3.0 Format"), one EVT_ADDR_X each.
+
+    Before an event: EVT_TIME_HIGH ``0x8`` (``t[23:12]``) when ``t >> 12`` changed, EVT_TIME_LOW
+    ``0x6`` (``t[11:0]``) when ``t`` changed, EVT_ADDR_Y ``0x0`` (``y``) when ``y`` changed; then
+    EVT_ADDR_X ``0x2`` with the polarity in bit 11 and ``x`` in bits 10..0.
+
+    Args:
+        t, x, y, p: ``[E]`` sorted µs times, columns, rows (< 2048) and polarities (1 = ON, 0 = OFF).
+        prev: ``(t, y)`` of the previous event (``(-1, -1)`` at the start of a file).
+
+    Returns:
+        ``(words [W] uint16, prev)`` with ``prev`` for the next chunk.
+    """
+    t = np.asarray(t, np.int64)
+    prev_t = np.concatenate([[prev[0]], t[:-1]])
+    prev_y = np.concatenate([[prev[1]], y[:-1].astype(np.int64)])
+    need = [(t >> 12) != (prev_t >> 12), t != prev_t, y != prev_y]
+    values = [lambda k: 0x8000 | ((t[k] >> 12) & 0xFFF), lambda k: 0x6000 | (t[k] & 0xFFF), lambda k: y[k]]
+    count = 1 + need[0].astype(np.int64) + need[1] + need[2]
+    pos = np.cumsum(count) - count
+    words = np.empty(int(count[-1] + pos[-1]), np.uint16)
+    for flag, value in zip(need, values):
+        words[pos[flag]] = value(flag)
+        pos += flag
+    words[pos] = 0x2000 | (p.astype(np.int64) << 11) | x
+    return words, (int(t[-1]), int(y[-1]))
+
+
+def write_evt3(path: Path, chunks: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+               width: int = EVT3_SIZE[0], height: int = EVT3_SIZE[1]) -> dict[str, int]:
+    """Write a Prophesee EVT 3.0 ``.raw`` file chunk by chunk (memory: one chunk).
+
+    Returns:
+        ``{"events", "bytes", "sum_t", "sum_x", "sum_y", "sum_p"}`` (``p`` as ±1) to check a decoder.
+    """
+    info = {"events": 0, "sum_t": 0, "sum_x": 0, "sum_y": 0, "sum_p": 0}
+    prev = (-1, -1)
+    with open(path, "wb") as fh:
+        fh.write(f"% evt 3.0\n% format EVT3;height={height};width={width}\n% geometry {width}x{height}\n"
+                 "% end\n".encode("ascii"))
+        for t, x, y, p in chunks:
+            words, prev = evt3_words(t, x, y, p, prev)
+            words.astype("<u2", copy=False).tofile(fh)
+            info["events"] += len(t)
+            info["sum_t"] += int(t.sum())
+            info["sum_x"] += int(x.sum(dtype=np.int64))
+            info["sum_y"] += int(y.sum(dtype=np.int64))
+            info["sum_p"] += 2 * int(p.sum(dtype=np.int64)) - len(p)
+    info["bytes"] = path.stat().st_size
+    return info
+
+
+def _rss_bytes(field: str = "VmRSS") -> int:
+    """This process's resident memory now (``VmRSS``) or its peak since ``exec`` (``VmHWM``), from
+    Linux's ``/proc/self/status``; elsewhere ``ru_maxrss`` (KiB on Linux, bytes on macOS)."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith(field + ":"):
+                return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * (1 if sys.platform == "darwin" else 1024)
+
+
+def _evt3_child(path: str) -> None:
+    """In a fresh process: decode ``path`` once with fusiongs' reader; print JSON figures."""
+    import faery.extension  # noqa: F401  (imports are not decoding: load before the baseline)
+
+    from fusiongs.events.readers.prophesee import read_prophesee_raw
+
+    before = _rss_bytes()
+    t0 = time.perf_counter()
+    s = read_prophesee_raw(path)
+    seconds = time.perf_counter() - t0
+    print(json.dumps({"seconds": seconds, "imports_bytes": before, "peak_bytes": _rss_bytes("VmHWM"),
+                      "events": len(s),
+                      "out_bytes": sum(a.nbytes for a in (s.t, s.x, s.y, s.p)),
+                      "sum_t": int(s.t.sum()), "sum_x": int(s.x.sum(dtype=np.int64)),
+                      "sum_y": int(s.y.sum(dtype=np.int64)), "sum_p": int(s.p.sum(dtype=np.int64))}))
+
+
+def evt3_large_table(n: int, folder: Path | None = None) -> None:
+    """Write ``n`` synthetic EVT 3.0 events to a temporary file, decode it in a child process, print
+    time and peak memory against the output arrays' size (see the module docstring)."""
+    folder = Path(folder or tempfile.gettempdir())
+    estimate = 8 * n  # at most 4 words per event; about 3 here
+    free = shutil.disk_usage(folder).free
+    if free < 2 * estimate:
+        raise SystemExit(f"{folder}: {free / 2**30:.1f} GiB free, the EVT3 file may need "
+                         f"{estimate / 2**30:.1f} GiB (pass --tmp DIR)")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    with tempfile.TemporaryDirectory(dir=folder, prefix="bench_evt3_") as d:
+        path = Path(d) / "synthetic_evt3.raw"
+        t0 = time.perf_counter()
+        info = write_evt3(path, synthetic_evt3_chunks(n))
+        write_s = time.perf_counter() - t0
+        res = subprocess.run([sys.executable, __file__, "--evt3-child", str(path)], capture_output=True,
+                             text=True, env=env)
+        if res.returncode:
+            raise SystemExit(f"decoding failed (exit {res.returncode}): {res.stderr.strip()[-2000:]}")
+    r = json.loads(res.stdout.strip().splitlines()[-1])
+    # the child's own high-water mark: ru_maxrss (RUSAGE_CHILDREN) would also count this process's
+    # resident memory at the spawn (Linux hands the pre-exec high-water mark on to the new program)
+    child_peak = r["peak_bytes"]
+    children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+    same = all(r[k] == info[k] for k in ("events", "sum_t", "sum_x", "sum_y", "sum_p"))
+    out, imports = r["out_bytes"], r["imports_bytes"]
+    print(f"synthetic EVT 3.0, {EVT3_SIZE[0]}x{EVT3_SIZE[1]}, written in {write_s:.1f} s; one decoding "
+          "in a fresh process (fusiongs.events.readers.prophesee)")
+    print("| events | file | seconds | peak RSS (child) | RSS after imports | output arrays | "
+          "peak / output | values |\n|---|---|---|---|---|---|---|---|")
+    print(f"| {r['events']:,} | {info['bytes'] / 2**20:,.0f} MiB | {r['seconds']:.2f} | "
+          f"{child_peak / 2**20:,.0f} MiB | {imports / 2**20:,.0f} MiB | {out / 2**20:,.0f} MiB | "
+          f"{(child_peak - imports) / max(out, 1):.2f} | {'equal sums' if same else 'DIFFER'} |")
+    print(f"(peak / output: the peak above the RSS after imports over the output's size; ru_maxrss of "
+          f"the children, which includes this process at the spawn: {children / 2**20:,.0f} MiB)")
+
+
 def main() -> None:
     if len(sys.argv) == 5 and sys.argv[1] == "--child":
         _raw_child(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+        return
+    if len(sys.argv) == 3 and sys.argv[1] == "--evt3-child":
+        _evt3_child(sys.argv[2])
         return
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=10_000_000, help="events per case")
@@ -182,7 +340,13 @@ def main() -> None:
     ap.add_argument("--raw", type=Path, default=REAL_EVT3,
                     help="Prophesee .raw file of the reader table (its header must give the size)")
     ap.add_argument("--no-synthetic", action="store_true", help="only the .raw reader table")
+    ap.add_argument("--evt3-large", type=float, nargs="?", const=1e8, default=None, metavar="N",
+                    help="only the synthetic EVT 3.0 table with N events (default 1e8)")
+    ap.add_argument("--tmp", type=Path, default=None, help="folder for the synthetic EVT 3.0 file")
     args = ap.parse_args()
+    if args.evt3_large is not None:
+        evt3_large_table(int(args.evt3_large), args.tmp)
+        return
     if not args.no_synthetic:
         synthetic_table(args.n, args.repeat)
     if args.raw.is_file():

@@ -106,11 +106,20 @@ def read_tum(path: str | Path) -> PoseSamples:
     return PoseSamples(t=a[:, 0].copy(), c2w=c2w)
 
 
-def write_tum(path: str | Path, poses: PoseSamples) -> None:
-    """Write poses as a TUM file (times with microsecond precision or better)."""
+def write_tum(path: str | Path, poses: PoseSamples, comment: str | None = None) -> None:
+    """Write poses as a TUM file (times and values with 9 decimals), atomically.
+
+    Args:
+        path: the file; replaced only once it is completely written.
+        poses: the samples to write.
+        comment: optional text for ``#`` lines above the column header (one per line of text).
+    """
+    from fusiongs.atomic import write_text
+
     q = matrix_to_quat_xyzw(poses.c2w[:, :3, :3])
     tr = poses.c2w[:, :3, 3]
-    lines = ["# t tx ty tz qx qy qz qw (camera-to-world, OpenCV axes)"]
+    lines = [f"# {c}".rstrip() for c in (comment.splitlines() if comment else [])]
+    lines.append("# t tx ty tz qx qy qz qw (camera-to-world, OpenCV axes)")
     for t, p, qq in zip(poses.t, tr, q):
         lines.append(" ".join(f"{v:.9f}" for v in (t, *p, *qq)))
-    Path(path).write_text("\n".join(lines) + "\n")
+    write_text(path, "\n".join(lines) + "\n")

@@ -9,6 +9,8 @@ import numpy as np
 import torch
 
 from fusiongs.atomic import write_text
+from fusiongs.camera.trajectory import Trajectory
+from fusiongs.camera.tum import PoseSamples, write_tum
 from fusiongs.frames.image_io import read_image, write_png
 from fusiongs.frames.response import linear_to_srgb, response_to_linear
 from fusiongs.io.scene import Scene
@@ -16,6 +18,10 @@ from fusiongs.scene.ply import save_ply
 from fusiongs.train.config import save_config
 from fusiongs.train.state import FusionState
 from fusiongs.train.trainer import Trained
+
+TRAJECTORY_FILE = "trajectory.txt"  # the refined camera path (the pose stage's own is trajectory_initial.txt)
+TRAJECTORY_RATE_HZ = 200.0  # the written path is at least this dense
+
 
 
 @torch.no_grad()
@@ -49,8 +55,69 @@ def write_thresholds(state: FusionState, path: Path) -> dict:
     return doc
 
 
+def trajectory_times(sample_t: np.ndarray, keep_t=(), rate_hz: float = TRAJECTORY_RATE_HZ,
+                     min_gap: float = 1e-6) -> np.ndarray:
+    """Instants (s) at which to write a refined trajectory: its own sample times, intervals longer
+    than ``1 / rate_hz`` split evenly, and ``keep_t`` (e.g. the frame mid-times, clamped into the
+    sampled range) exactly.
+
+    Args:
+        sample_t: ``[M]`` strictly increasing sample times of the trajectory (s).
+        keep_t: instants that must appear as they are; a grid instant closer than ``min_gap`` to
+            one of them is dropped (the file's times stay strictly increasing after rounding).
+        rate_hz: the slowest sampling rate of the result.
+        min_gap: smallest spacing kept (s).
+
+    Returns:
+        ``[N]`` strictly increasing times within ``[sample_t[0], sample_t[-1]]``.
+    """
+    st = np.asarray(sample_t, dtype=np.float64).reshape(-1)
+    step = 1.0 / rate_hz
+    if st.size > 1:
+        gaps = np.diff(st)
+        parts = np.maximum(np.ceil(gaps / step - 1e-9), 1).astype(np.int64)
+        seg = np.repeat(np.arange(gaps.size), parts)
+        k = np.arange(seg.size) - np.repeat(np.cumsum(parts) - parts, parts)
+        grid = np.append(st[seg] + gaps[seg] * k / parts[seg], st[-1])
+    else:
+        grid = st
+    keep = np.unique(np.clip(np.asarray(keep_t, dtype=np.float64).reshape(-1), st[0], st[-1]))
+    if keep.size:
+        i = np.searchsorted(keep, grid)
+        near = np.minimum(np.abs(grid - keep[np.clip(i, 0, keep.size - 1)]),
+                          np.abs(grid - keep[np.clip(i - 1, 0, keep.size - 1)]))
+        grid = grid[near >= min_gap]
+    t = np.union1d(grid, keep)
+    ok = np.concatenate([[True], np.diff(t) >= min_gap])  # drop one of two instants closer than min_gap
+    return t[ok]
+
+
+def refined_poses(trajectory: Trajectory, keep_t=(), rate_hz: float = TRAJECTORY_RATE_HZ,
+                  batch: int = 20000) -> PoseSamples:
+    """The trajectory as it was optimised (knot corrections included), evaluated at
+    :func:`trajectory_times` of its sample times (host float64)."""
+    ts = trajectory_times(trajectory.sample_t.cpu().numpy(), keep_t, rate_hz)
+    c2w = [trajectory.as_pose_samples(ts[i:i + batch]).c2w for i in range(0, ts.size, batch)]
+    return PoseSamples(t=ts, c2w=np.concatenate(c2w))
+
+
+def write_trajectory(tr: Trained, scene: Scene, path: Path) -> PoseSamples:
+    """``trajectory.txt``: the refined camera path in the scene format's own layout (FORMAT.md),
+    dense (:data:`TRAJECTORY_RATE_HZ`) and exact at the frame mid-times; usable as a scene's
+    ``trajectory.txt``."""
+    traj = tr.state.trajectory
+    mids = scene.frames.mid_times() if len(scene.frames) else ()
+    poses = refined_poses(traj, mids)
+    refined = "refined" if traj.delta is not None else "fitted (pose refinement off)"
+    write_tum(path, poses, comment=f"camera path {refined} by fusiongs deblur, {tr.iteration} "
+              f"iterations ({traj.mode} trajectory); samples at least {TRAJECTORY_RATE_HZ:g} Hz "
+              "and at every frame's mid-exposure")
+    return poses
+
+
 def write_outputs(tr: Trained, scene: Scene, out: Path) -> dict[str, np.ndarray]:
-    """Write renders, deblurred frames and video, model, config and thresholds.
+    """Write renders, deblurred frames and video, model, config, thresholds and the refined
+    camera path (``trajectory.txt``).
 
     Returns:
         ``{name: sRGB image}`` for every ``renders`` entry and ``deblur/<stem>`` frame.
@@ -75,6 +142,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path) -> dict[str, np.ndarray]
     save_ply(state.model, out / "model.ply")
     save_config(cfg, out / "config.yaml")
     write_thresholds(state, out / "thresholds.json")
+    write_trajectory(tr, scene, out / TRAJECTORY_FILE)
     return images
 
 

@@ -2,9 +2,11 @@
 intrinsics, EDI-deblur its frames and register them with pycolmap
 (:func:`fusiongs.camera.poses_from_frames.estimate_camera_and_trajectory`).
 
-Outputs beside the run: ``trajectory.txt`` (TUM, FORMAT.md) and ``camera.json`` (the intrinsics,
-which of camera and trajectory were estimated, and the registration report). ``--resume`` reads
-them back instead of estimating again.
+Outputs beside the run: ``trajectory_initial.txt`` (TUM, FORMAT.md: the poses training starts
+from) and ``camera.json`` (the intrinsics, which of camera and trajectory were estimated, and the
+registration report). ``--resume`` reads them back instead of estimating again; the refined path
+that training ends with is ``trajectory.txt`` (:mod:`fusiongs.train.outputs`), which a resumed run
+must not start from (its checkpoint corrects the initial poses).
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ if TYPE_CHECKING:
     from fusiongs.train.settings import DeblurConfig
 
 CAMERA_FILE = "camera.json"
-TRAJECTORY_FILE = "trajectory.txt"
+TRAJECTORY_FILE = "trajectory_initial.txt"  # not trajectory.txt: that is the refined path
 PAD_S = 1e-6  # poses reach 1 µs beyond the exposures, so rounding in trajectory.txt keeps them inside
 
 
@@ -161,7 +163,7 @@ def summary_line(result: PoseStageResult) -> str:
 
 
 def write_pose_outputs(out: str | Path, result: PoseStageResult) -> None:
-    """``out/trajectory.txt`` (the scene's poses, TUM) and ``out/camera.json``."""
+    """``out/trajectory_initial.txt`` (the scene's poses, TUM) and ``out/camera.json``."""
     from fusiongs.atomic import write_text
     from fusiongs.camera.tum import write_tum
 
@@ -208,9 +210,9 @@ def run_pose_stage(scene: Scene, cfg: DeblurConfig, out: str | Path,
     Args:
         scene: the loaded scene; returned unchanged when it has its trajectory and intrinsics.
         cfg: the run's :class:`~fusiongs.train.settings.DeblurConfig` (threshold settings).
-        out: the run folder (``trajectory.txt`` and ``camera.json`` are written there).
+        out: the run folder (``trajectory_initial.txt`` and ``camera.json`` are written there).
         calibration: thresholds from ``--calibration``, or ``None``.
-        resume: reuse ``trajectory.txt`` and ``camera.json`` of ``out`` when both exist.
+        resume: reuse ``trajectory_initial.txt`` and ``camera.json`` of ``out`` when both exist.
         log: where the summary line goes.
 
     Returns:

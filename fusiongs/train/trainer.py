@@ -201,8 +201,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
     tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
     order = torch.randperm(max(data.n_frames, 1), generator=gen, device=gen.device).tolist()
+    # a bar on a terminal only: a log or CI gets pipeline.run_deblur's one summary line
+    tty = sys.stderr is not None and sys.stderr.isatty()
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
-               disable=not cfg.output.progress, desc="fusiongs", dynamic_ncols=True)
+               disable=not (cfg.output.progress and tty), desc="fusiongs", dynamic_ncols=True,
+               file=sys.stderr)
     psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
     pending: list[_Pending] = []
     t_begin, seconds_before = time.perf_counter(), history.seconds
