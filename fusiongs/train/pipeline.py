@@ -214,7 +214,8 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
 
     A scene without trajectory or intrinsics first goes through the pose stage
     (:func:`fusiongs.train.poses_stage.run_pose_stage`: EDI images registered by pycolmap), which
-    writes ``out/trajectory.txt`` and ``out/camera.json``.
+    writes ``out/trajectory_initial.txt`` and ``out/camera.json`` (the refined path,
+    ``out/trajectory.txt``, is written with the other outputs after training).
 
     ``holdout = K`` (``--holdout``; 0 or None = off) trains without every K-th frame
     (:mod:`fusiongs.eval.holdout`), then predicts them and writes ``out/heldout.json``; the other
