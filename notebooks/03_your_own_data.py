@@ -128,7 +128,8 @@ def cut_scene(src, dst, n_frames=6, factor=2):
     events = EventStream.create(e.t, e.x // factor, e.y // factor, e.p, w, h, ev.cfa, drop_invalid=True)
     frames = FrameSet(imgs, fs.t_start[:n].copy(), fs.t_end[:n].copy(), fs.names[:n], fs.response)
     camera = dataclasses.replace(s.camera, width=w, height=h)
-    save_scene(dataclasses.replace(s, camera=camera, events=events, frames=frames, renders=(), root=None), dst)
+    cut = dataclasses.replace(s, camera=camera, events=events, frames=frames, renders=(), root=None)
+    save_scene(cut, dst)
     return Path(dst)
 
 
@@ -158,15 +159,18 @@ print(f"{len(ev):,} events, {ev.width}x{ev.height}, ON fraction {ev.polarity_bal
 print("intrinsics known:", scene.camera.intrinsics_known, "| trajectory:", scene.poses is not None)
 
 # %% [markdown]
-# Frame `K - 1` (the first one step 4 leaves out of training) and the events inside its exposure: red where brightness went up (ON), blue where it
-# went down (OFF). The events show the edges the blur has smeared.
+# Frame `K - 1` (the first one step 4 leaves out of training) and the events inside its exposure:
+# red where brightness went up (ON), blue where it went down (OFF). The events show the edges the
+# blur has smeared.
 
 # %%
 i = min(K - 1, len(fs) - 1)
 t0_us, t1_us = int(fs.t_start[i] * 1e6), int(fs.t_end[i] * 1e6)
 mid = (t0_us + t1_us) // 2
 win = (t1_us - t0_us) // 8
-fig = viz.strip([fs.images[i], viz.event_frame(ev, t0_us, t1_us), viz.event_frame(ev, mid - win // 2, mid + win // 2)],
+panels = [fs.images[i], viz.event_frame(ev, t0_us, t1_us),
+          viz.event_frame(ev, mid - win // 2, mid + win // 2)]
+fig = viz.strip(panels,
                 [f"frame {fs.names[i]} ({exp_ms[i]:.0f} ms exposure)", "events of the whole exposure",
                  f"events of {win / 1e3:.0f} ms at mid-exposure"])
 
