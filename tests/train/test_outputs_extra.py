@@ -18,31 +18,10 @@ from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples, quat_xyzw_to_matrix, read_tum
 from fusiongs.cli import main
 from fusiongs.io import load_scene
-from fusiongs.sim.simulate import SimConfig, run_simulation
-from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.outputs import TRAJECTORY_RATE_HZ, trajectory_times, write_trajectory
+from tests.train.conftest import TINY
 
-TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
-        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
-        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
 F64 = torch.float64
-
-
-@pytest.fixture(scope="module")
-def tiny_scene(tmp_path_factory):
-    root = tmp_path_factory.mktemp("scene")
-    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.12, frames=2, exposure=0.03,
-                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
-    res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
-    return root
-
-
-@pytest.fixture(scope="module")
-def tiny_run(tiny_scene, tmp_path_factory):
-    out = tmp_path_factory.mktemp("run")
-    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY]) == 0
-    return out
 
 
 def _random_samples(n: int, span: float, seed: int = 0) -> PoseSamples:

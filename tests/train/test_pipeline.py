@@ -18,27 +18,7 @@ from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.checkpoint import load_checkpoint
 from fusiongs.train.config import load_config
 from fusiongs.train.settings import DeblurConfig
-
-TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
-        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
-        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
-
-
-@pytest.fixture(scope="module")
-def tiny_scene(tmp_path_factory):
-    root = tmp_path_factory.mktemp("scene")
-    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.12, frames=2, exposure=0.03,
-                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
-    res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
-    return root
-
-
-@pytest.fixture(scope="module")
-def tiny_run(tiny_scene, tmp_path_factory):
-    out = tmp_path_factory.mktemp("run")
-    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY]) == 0
-    return out
+from tests.train.conftest import TINY
 
 
 def test_deblur_writes_every_output(tiny_scene, tiny_run):

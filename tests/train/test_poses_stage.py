@@ -13,10 +13,7 @@ from fusiongs.frames.image_io import write_png
 from fusiongs.io import load_scene
 from fusiongs.train.poses_stage import estimate_scene_poses, needs_pose_stage, read_pose_outputs
 from tests.conftest import real_data_dir
-
-TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
-        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
-        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
+from tests.train.conftest import TINY
 
 
 def cut_recording(src, dst, n_frames: int):
