@@ -71,7 +71,6 @@ class CalibrateOptions:
         hot_floor: see ``hot_factor``.
         refractory_gate: pixels with two events closer than this multiple of the estimated dead
             time are left out of a pair (0 disables the gate).
-        count_power: residual weight ``(N_+ + N_- + 1) ** -count_power`` (0 = plain L1).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
         iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_sums`).
         trim: residuals farther than this many robust standard deviations from their pair's
@@ -96,7 +95,6 @@ class CalibrateOptions:
     hot_factor: float = 5.0
     hot_floor: float = 20.0
     refractory_gate: float = 2.0
-    count_power: float = 0.0
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
@@ -209,7 +207,6 @@ class PairData:
         valid: ``[Q, P]`` bool, pixel usable in the pair.
         tile: ``[P]`` int64 bootstrap tile of every pixel.
         n_tiles: number of tiles.
-        weight: ``[Q, P]`` weight of every residual.
         z: ``[Q, 2, P]`` instruments: the median ON/OFF counts of the pixel's four same-channel
             neighbours over the same pair (:func:`iv_thresholds`).
     """
@@ -221,12 +218,11 @@ class PairData:
     valid: torch.Tensor
     tile: torch.Tensor
     n_tiles: int
-    weight: torch.Tensor
     z: torch.Tensor
 
     def subset(self, idx: torch.Tensor) -> PairData:
         return PairData(self.log_s[:, idx], self.n[..., idx], self.pairs, self.dn[..., idx],
-                        self.valid[:, idx], self.tile[idx], self.n_tiles, self.weight[:, idx],
+                        self.valid[:, idx], self.tile[idx], self.n_tiles,
                         self.z[..., idx])
 
 
@@ -252,7 +248,7 @@ def tile_losses(data: PairData, theta_pos: torch.Tensor, theta_neg: torch.Tensor
     valid = data.valid[None].expand_as(r)
     med = torch.where(valid, r, torch.full_like(r, float("nan"))).nanmedian(dim=2, keepdim=True).values
     scale = torch.sqrt(tp * tn)[:, :, 0] if count_units else 1.0  # [G, 1, 1]: residuals in events
-    a = torch.where(valid, (r - torch.nan_to_num(med)).abs() * data.weight / scale,
+    a = torch.where(valid, (r - torch.nan_to_num(med)).abs() / scale,
                     torch.zeros_like(r)).sum(dim=1)
     g = a.shape[0]
     out = torch.zeros(g, data.n_tiles, dtype=torch.float64)
@@ -480,6 +476,12 @@ def neighbour_counts(between: np.ndarray, height: int, width: int, step: int) ->
 
 
 # ---------------------------------------------------------------------------- data preparation
+def tile_ids(pix: np.ndarray, width: int, tile: int) -> np.ndarray:
+    """``[P]`` int64 index of the ``tile`` x ``tile`` pixel square holding each flat pixel index."""
+    tiles_x = (width + tile - 1) // tile
+    return (pix // width // tile) * tiles_x + (pix % width) // tile
+
+
 def frame_pairs(n_frames: int, max_gap: int) -> np.ndarray:
     """``[Q, 2]`` int64 pairs ``(i, j)`` with ``1 <= j - i <= max_gap`` (all baselines up to it)."""
     return np.array([(i, i + k) for k in range(1, max_gap + 1) for i in range(n_frames - k)],
@@ -488,7 +490,7 @@ def frame_pairs(n_frames: int, max_gap: int) -> np.ndarray:
 
 def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray, pix: np.ndarray,
                     bad_pair: np.ndarray, frame_ok: np.ndarray, width: int, tile: int,
-                    count_power: float = 0.0, max_gap: int = 1,
+                    max_gap: int = 1,
                     neighbours: np.ndarray | None = None) -> PairData:
     """:class:`PairData` of the pixels ``pix`` (flat indices).
 
@@ -499,7 +501,6 @@ def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndar
             a longer pair is excluded when any consecutive pair it spans is.
         frame_ok: ``[F, H*W]`` bool, intensity neither saturated nor near black.
         width: sensor width (tiles). tile: tile side in pixels.
-        count_power: residual weight ``(N_+ + N_- + 1) ** -count_power``.
         max_gap: longest baseline ``j - i`` of the compared frame pairs.
         neighbours: ``[F-1, 2, H*W]`` instrument counts between consecutive mid-exposures
             (:func:`neighbour_counts`); ``between`` itself when None.
@@ -517,18 +518,14 @@ def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndar
     moved = np.abs(n).sum((1, 2))  # [F] events inside each exposure
     active = (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
     valid = frame_ok[pairs[:, 0]][:, pix] & frame_ok[pairs[:, 1]][:, pix] & ~bad & active
-    x, y = pix % width, pix // width
-    tiles_x = (width + tile - 1) // tile
-    tid = (y // tile) * tiles_x + x // tile
-    uniq, tid = np.unique(tid, return_inverse=True)
-    weight = (dn.sum(1) + 1.0) ** (-count_power)
+    uniq, tid = np.unique(tile_ids(pix, width, tile), return_inverse=True)
     zc = np.concatenate([np.zeros((1, 2, pix.size), np.float32),
                          np.cumsum(neighbours[..., pix].astype(np.float32), axis=0)])
     z = zc[pairs[:, 1]] - zc[pairs[:, 0]]
     return PairData(torch.as_tensor(log_s, dtype=torch.float32), torch.as_tensor(n),
                     torch.as_tensor(pairs), torch.as_tensor(dn), torch.as_tensor(valid),
                     torch.as_tensor(tid.astype(np.int64)), int(uniq.size),
-                    torch.as_tensor(weight.astype(np.float32)), torch.as_tensor(z))
+                    torch.as_tensor(z))
 
 
 def _check_inputs(frames: FrameSet, events: EventStream) -> None:
@@ -593,7 +590,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         if sel.size > opts.max_pixels:
             sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
         data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
-                               opts.count_power, opts.max_gap, neigh)
+                               opts.max_gap, neigh)
         res = search_both(data, opts, rng)
         out_p.append(res["theta_pos"])
         out_n.append(res["theta_neg"])
@@ -624,10 +621,7 @@ def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch:
                    opts: CalibrateOptions, rng: np.random.Generator) -> list[dict]:
     """Per channel ``theta_- / theta_+ = sum N_+ / sum N_-`` with a tile-bootstrap uncertainty."""
     cm = events.count_maps().reshape(2, -1).astype(np.float64)
-    w = events.width
-    tiles_x = (w + opts.tile - 1) // opts.tile
-    pix = np.arange(cm.shape[1])
-    tid = (pix // w // opts.tile) * tiles_x + (pix % w) // opts.tile
+    tid = tile_ids(np.arange(cm.shape[1]), events.width, opts.tile)
     out = []
     for c in range(n_ch):
         sel = (chan == c) & ~hot
