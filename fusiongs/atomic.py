@@ -1,12 +1,21 @@
-"""Atomic file writes: write beside the target, then ``os.replace`` (nothing half-written is left)."""
+"""Atomic file writes: write beside the target, then ``os.replace`` (nothing half-written is left).
+
+A process killed while writing (``kill -9``) leaves the target as it was and, beside it, its
+temporary: a hidden file named ``.<stem>.<8 random characters>.tmp<suffix>``
+(:func:`is_temporary`), which :func:`remove_temporaries` clears away.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+
+# mkstemp's names: prefix + 8 characters of [a-z0-9_] + suffix
+_TEMPORARY = re.compile(r"\..+\.[a-z0-9_]{8}\.tmp(\.[^.]*)?")
 
 
 @contextlib.contextmanager
@@ -29,6 +38,33 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def is_temporary(path: str | Path) -> bool:
+    """Whether ``path`` is named like a temporary of :func:`atomic_path`
+    (``.<stem>.XXXXXXXX.tmp<suffix>``)."""
+    return _TEMPORARY.fullmatch(Path(path).name) is not None
+
+
+def remove_temporaries(folder: str | Path, depth: int = 1) -> list[Path]:
+    """Delete the temporaries that interrupted :func:`atomic_path` writes left in ``folder`` and in
+    its subfolders down to ``depth`` levels (a run killed while writing its outputs).
+
+    Only files named as :func:`is_temporary` says are touched; call it only when no other process
+    writes into ``folder``. Returns the removed paths.
+    """
+    folder = Path(folder)
+    removed = []
+    if not folder.is_dir():
+        return removed
+    for entry in sorted(folder.iterdir()):
+        if entry.is_dir() and not entry.is_symlink():
+            if depth > 0:
+                removed += remove_temporaries(entry, depth - 1)
+        elif is_temporary(entry) and entry.is_file():
+            entry.unlink(missing_ok=True)
+            removed.append(entry)
+    return removed
 
 
 def _umask() -> int:

@@ -121,6 +121,34 @@ class DensifyStrategy:
         """Stop resetting opacities from now on."""
         self.reset_opacity_enabled = False
 
+    def state_dict(self) -> dict[str, Any]:
+        """What a resumed run needs to refine as this one would: the statistics gathered since the
+        last refinement (``None`` when none), the split generator's state (``None`` before the
+        first split) and whether opacity resets are on. Tensors are copies on the CPU."""
+        def cpu(x: torch.Tensor | None) -> torch.Tensor | None:
+            return None if x is None else x.detach().cpu().clone()
+
+        gen = self._generator
+        return {"grad2d": cpu(self.grad2d), "count": cpu(self.count), "max_radii": cpu(self.max_radii),
+                "generator": None if gen is None else {"device": gen.device.type, "state": gen.get_state()},
+                "reset_opacity_enabled": self.reset_opacity_enabled}
+
+    def load_state_dict(self, state: Mapping[str, Any], device: torch.device | str = "cpu") -> None:
+        """Continue from :meth:`state_dict`; statistics go to ``device`` (the model's). A generator
+        saved on another kind of device is not restored (split children are then drawn afresh
+        from ``seed``)."""
+        def on(x: torch.Tensor | None) -> torch.Tensor | None:
+            return None if x is None else x.to(device=device, dtype=torch.float32).clone()
+
+        self.grad2d, self.count = on(state["grad2d"]), on(state["count"])
+        self.max_radii = on(state["max_radii"])
+        self.reset_opacity_enabled = bool(state["reset_opacity_enabled"])
+        self._generator = None
+        saved = state.get("generator")
+        if saved is not None and saved["device"] == torch.device(device).type:
+            self._generator = torch.Generator(device=device)
+            self._generator.set_state(saved["state"])
+
     def step_pre_backward(self, meta: Any | Sequence[Any]) -> None:
         """Keep the gradient of ``meta.means2d`` (one meta or a sequence of them)."""
         for m in meta if isinstance(meta, (list, tuple)) else [meta]:

@@ -115,7 +115,10 @@ def build_trajectory(scene: Scene, cfg: DeblurConfig, device: torch.device) -> T
 
 
 def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator,
-             device_gen: torch.Generator) -> dict[str, Any]:
+             device_gen: torch.Generator, strategy: DensifyStrategy,
+             psnr_running: torch.Tensor | None) -> dict[str, Any]:
+    """Everything a resumed run needs to go on exactly as this one would (same frames, draws,
+    densification and optimiser steps)."""
     s = tr.state
     return {
         "iteration": tr.iteration,
@@ -134,6 +137,8 @@ def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Gen
         "history": asdict(tr.history),
         "generator": gen.get_state(),
         "device_generator": {"device": device_gen.device.type, "state": device_gen.get_state()},
+        "densify": strategy.state_dict(),
+        "psnr_running": None if psnr_running is None else psnr_running.detach().cpu(),
     }
 
 
@@ -183,6 +188,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                         init_images(scene, data, cfg))
     extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
     start, history = 0, History()
+    # the frame order is the first draw of `gen`, made before a checkpoint replaces its state: a
+    # resumed run visits the frames in the same order
+    order = torch.randperm(max(data.n_frames, 1), generator=gen, device=gen.device).tolist()
     ckpt_path = out_dir / "checkpoint.pt"
     ckpt = load_checkpoint(ckpt_path) if resume and ckpt_path.exists() else None
     if ckpt is not None:
@@ -199,21 +207,25 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if k in ckpt.get("optimizers", {}):
                 o.load_state_dict(ckpt["optimizers"][k])
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
+    psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
+    if ckpt is not None:
+        if "densify" in ckpt:  # statistics since the last refinement, the split generator
+            strategy.load_state_dict(ckpt["densify"], state.model.means.device)
+        if ckpt.get("psnr_running") is not None:
+            psnr_now = ckpt["psnr_running"].to(device)
     tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
-    order = torch.randperm(max(data.n_frames, 1), generator=gen, device=gen.device).tolist()
     # a bar on a terminal only: a log or CI gets pipeline.run_deblur's one summary line
     tty = sys.stderr is not None and sys.stderr.isatty()
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
                disable=not (cfg.output.progress and tty), desc="fusiongs", dynamic_ncols=True,
                file=sys.stderr)
-    psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
     pending: list[_Pending] = []
     t_begin, seconds_before = time.perf_counter(), history.seconds
 
     def save() -> None:
         _flush(history, pending, bar)
         history.seconds = seconds_before + time.perf_counter() - t_begin
-        save_checkpoint(ckpt_path, _payload(tr, opts, gen, device_gen))
+        save_checkpoint(ckpt_path, _payload(tr, opts, gen, device_gen, strategy, psnr_now))
         write_history(history, out_dir / "history.jsonl")
 
     try:

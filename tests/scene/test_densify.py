@@ -182,3 +182,31 @@ def test_missing_gradient_is_reported():
 
 def test_param_names_cover_the_model():
     assert set(PARAM_NAMES) == {name for name, _ in _model().named_parameters()}
+
+
+def test_a_strategy_continued_from_its_state_dict_refines_as_the_original():
+    """What a resumed run relies on: the statistics since the last refinement and the split
+    generator come back, so the next refinement grows the same Gaussians with the same children."""
+    cfg = DensifyConfig(refine_start=0, refine_every=10, prune_opacity=0.0)
+
+    def run(restart: str) -> GaussianModel:
+        m = _model(n=4, scale=0.001)
+        with torch.no_grad():
+            m.log_scales[1] = torch.log(torch.tensor(0.5))  # large: split at 10 and 20
+        opt = make_optimizer(m)
+        s = DensifyStrategy(cfg, seed=3)
+        for step, grad in ((5, 1e-3), (10, 1e-3), (15, 1e-3), (20, 0.0)):
+            if step == 20 and restart != "none":  # a new strategy, as in a run resumed here
+                saved = s.state_dict()
+                s = DensifyStrategy(cfg, seed=3)
+                if restart == "state_dict":
+                    s.load_state_dict(saved)
+            g = torch.full((1, m.n, 2), grad)
+            meta = _meta_with_grad(m, g, torch.ones(1, m.n, 2, dtype=torch.int32))
+            s.step_post_backward(m, opt, meta, step=step)
+        return m
+
+    original, resumed, fresh = run("none"), run("state_dict"), run("fresh")
+    assert original.n > 6  # grown at 20 from the statistics of step 15
+    assert resumed.n == original.n and torch.equal(resumed.means, original.means)
+    assert fresh.n != original.n  # without them the refinement at 20 differs
