@@ -4,6 +4,8 @@ PSNR and SSIM are computed on 8-bit sRGB images (values quantised to k/255). SSI
 window (σ = 1.5, 11 taps), population (not sample) covariances and only the window positions that fit
 inside the image (Wang et al., IEEE TIP 2004; identical to ``kornia.metrics.ssim`` with
 ``padding='valid'`` and to scikit-image with ``gaussian_weights=True, use_sample_covariance=False``).
+Colour error is the mean CIEDE2000 difference ΔE00 (Sharma, Wu and Dalal, Color Res. Appl. 2005)
+over pixels, on CIE L*a*b* (D65) of the same 8-bit sRGB values, computed with colour-science.
 """
 
 from __future__ import annotations
@@ -51,6 +53,32 @@ def ssim(pred: np.ndarray | torch.Tensor, gt: np.ndarray | torch.Tensor) -> floa
     return float(m.mean())
 
 
+def srgb_to_lab(img: np.ndarray | torch.Tensor) -> np.ndarray:
+    """CIE L*a*b* ``[H, W, 3]`` (D65, L* in [0, 100]) of an sRGB image ``[H, W, C]`` (C = 1 or 3)
+    in [0, 1], after 8-bit quantisation; a grey image is taken as R = G = B."""
+    import colour
+
+    a = quantize8(img)
+    if a.shape[-1] == 1:
+        a = np.repeat(a, 3, axis=-1)
+    if a.shape[-1] != 3:
+        raise InputError("metrics", "image channels", "1 or 3", a.shape[-1])
+    white = colour.RGB_COLOURSPACES["sRGB"].whitepoint
+    return colour.XYZ_to_Lab(colour.sRGB_to_XYZ(a, illuminant=white), illuminant=white)
+
+
+def delta_e00(pred: np.ndarray | torch.Tensor, gt: np.ndarray | torch.Tensor) -> float:
+    """Mean CIEDE2000 colour difference over pixels of two sRGB images ``[H, W, C]`` in [0, 1].
+
+    0 for equal images; about 1 is a just noticeable difference; black to white is 100.
+    """
+    import colour
+
+    p, g = srgb_to_lab(pred), srgb_to_lab(gt)
+    _check_pair(p, g)
+    return float(np.mean(colour.delta_E(p, g, method="CIE 2000")))
+
+
 def affine_fit(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     """Per-channel least-squares affine correction ``a_c·pred + b_c`` of ``pred`` toward ``gt``.
 
@@ -71,8 +99,16 @@ def affine_fit(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     return np.clip(p * a + b, 0.0, 1.0)
 
 
-def image_metrics(pred: np.ndarray, gt: np.ndarray, *, affine: bool = False) -> dict[str, float]:
-    """``{"psnr", "ssim"}`` of one sRGB image pair, optionally after :func:`affine_fit`."""
+def image_metrics(pred: np.ndarray, gt: np.ndarray, *, affine: bool = False,
+                  delta_e: bool | None = None) -> dict[str, float]:
+    """``{"psnr", "ssim"}`` of one sRGB image pair, optionally after :func:`affine_fit`.
+
+    ``delta_e`` (default: the value of ``affine``) adds ``"delta_e00"``, :func:`delta_e00` of the
+    same (fitted) pair.
+    """
     if affine:
         pred = affine_fit(pred, gt)
-    return {"psnr": psnr(pred, gt), "ssim": ssim(pred, gt)}
+    out = {"psnr": psnr(pred, gt), "ssim": ssim(pred, gt)}
+    if affine if delta_e is None else delta_e:
+        out["delta_e00"] = delta_e00(pred, gt)
+    return out

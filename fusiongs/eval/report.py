@@ -105,16 +105,21 @@ def side_by_side(parts: Sequence[np.ndarray]) -> np.ndarray:
 
 
 def metric_rows(result: Mapping) -> list[list[str]]:
-    """Rows of the report's table: truth metrics (when ``result`` has them), held-out PSNR and
-    no-reference sharpness (when present)."""
+    """Rows of the report's table: truth metrics (when ``result`` has them; ΔE00 where measured),
+    the colour anchor, held-out PSNR and no-reference sharpness (when present)."""
     rows = []
     tables = [("", result)] + ([(" (affine fit)", result["affine_fit"])] if "affine_fit" in result else [])
     if "mean" in result:
-        rows.append(["views", "method", "n", "PSNR", "SSIM"])
+        de = any("delta_e00" in m for _, res in tables for by in res["mean"].values() for m in by.values())
+        rows.append(["views", "method", "n", "PSNR", "SSIM"] + (["dE00"] if de else []))
         for suffix, res in tables:
             for g, by in res["mean"].items():
                 for method, m in by.items():
-                    rows.append([g, method + suffix, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"])
+                    v = m.get("delta_e00")
+                    rows.append([g, method + suffix, str(m["n"]), f"{m['psnr']:.2f}", f"{m['ssim']:.3f}"]
+                                + ([f"{v:.2f}" if v is not None else "-"] if de else []))
+    if result.get("colour_anchor"):  # which anchor fixed the colours, if any
+        rows.append(["colour anchor", result["colour_anchor"]["label"]])
     if result.get("heldout"):
         rows.append(["held-out", "method", "n", "PSNR vs frame", ""])
         for method, m in result["heldout"]["mean"].items():

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from fusiongs.atomic import remove_temporaries, write_text
+from fusiongs.atomic import write_text
+from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_to_outputs
 from fusiongs.eval.evaluate import compare_methods, format_table
 from fusiongs.eval.holdout import format_heldout, frame_subset, holdout_indices, parse_holdout
 from fusiongs.frames.response import linear_to_srgb
@@ -65,31 +66,45 @@ def baseline_images(scene: Scene, thresholds=None) -> dict[str, dict[str, np.nda
     return out
 
 
-def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], out: Path,
-                     gt_dir: Path | None, heldout: tuple[dict, dict] | None = None) -> dict:
-    """metrics.json and report.png; returns the metrics.
-
-    Against truth when ``gt_dir`` holds images named like the outputs; always the no-reference
-    sharpness of the deblurred frames (:func:`fusiongs.eval.holdout.compare_sharpness`) and, with
-    ``heldout`` (from :func:`score_holdout`), the held-out scores and pictures.
-    """
-    from fusiongs.eval.holdout import compare_sharpness
-    from fusiongs.eval.report import write_report
-    from fusiongs.train.outputs import read_gt
-
+def _by_view(images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Output images keyed like the truth: renders by name, deblurred frames as ``deblur_<stem>``."""
     ours = {k: v for k, v in images.items() if not k.startswith("deblur/")}
     for k, v in images.items():
         if k.startswith("deblur/"):
             ours.setdefault(f"deblur_{k.split('/', 1)[1]}", v)
+    return ours
+
+
+def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], out: Path,
+                     gt_dir: Path | None, heldout: tuple[dict, dict] | None = None,
+                     anchor: ColourAnchor | None = None,
+                     unanchored: dict[str, np.ndarray] | None = None) -> dict:
+    """metrics.json and report.png; returns the metrics.
+
+    Against truth when ``gt_dir`` holds images named like the outputs; always the no-reference
+    sharpness of the deblurred frames (:func:`fusiongs.eval.holdout.compare_sharpness`) and, with
+    ``heldout`` (from :func:`score_holdout`), the held-out scores and pictures. With no frame or
+    an applied colour ``anchor`` (``images`` anchored, ``unanchored`` before), also the colour
+    figures of :func:`fusiongs.eval.evaluate.colour_metrics` and the anchor.
+    """
+    from fusiongs.eval.evaluate import colour_metrics
+    from fusiongs.eval.holdout import compare_sharpness
+    from fusiongs.eval.report import write_report
+    from fusiongs.train.outputs import read_gt
+
+    anchor = anchor or ColourAnchor()
+    ours = _by_view(images)
     gt = read_gt(gt_dir, ours.keys()) if gt_dir is not None and gt_dir.is_dir() else {}
     methods = {"fusiongs": ours, **baseline_images(scene, tr.initial_thresholds)}
+    colour = len(scene.frames) == 0 or anchor.applied  # colours the events alone do not fix
     if gt:
-        result = compare_methods(methods, gt)
+        result = compare_methods(methods, gt, delta_e=anchor.applied)
+        if colour:
+            result |= colour_metrics(methods, gt, anchor, _by_view(unanchored or images))
         if len(scene.frames) == 0:  # event-only: brightness and colour balance are not observable
-            result["affine_fit"] = compare_methods(methods, gt, affine=True)
             result["note"] = EVENT_ONLY_NOTE
     else:
-        result = {"note": NO_TRUTH_NOTE}
+        result = {"note": NO_TRUTH_NOTE} | ({"colour_anchor": anchor.as_dict()} if colour else {})
     sharp = compare_sharpness(methods)
     if sharp:
         result["sharpness"] = sharp
@@ -233,7 +248,6 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     fit_scene = dataclasses.replace(scene, frames=frame_subset(scene.frames, kept)) if held.size else scene
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    remove_temporaries(out)  # half-written files of a run killed in this folder (kill -9)
     if needs_pose_stage(fit_scene):  # no trajectory or no intrinsics: EDI + pycolmap first
         fit_scene, calib = run_pose_stage(fit_scene, cfg, out, calib, resume=resume, log=log)
     tr = train(fit_scene, cfg, out, resume=resume, calibration=calib)
@@ -243,6 +257,10 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     images = write_outputs(tr, scene, out)
+    anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
+    unanchored, images = images, apply_to_outputs(anchor, images, out, cfg.output.video_fps)
+    if anchor.applied:
+        log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
     n_it = max(tr.iteration, 1)
     h = tr.history
     log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "
@@ -252,14 +270,21 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     if heldout is not None:
         write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")
         log(format_heldout(heldout[0]))
-    result = evaluate_outputs(tr, scene, images, out, scene.root / "gt" if scene.root else None, heldout)
+    result = evaluate_outputs(tr, scene, images, out, scene.root / "gt" if scene.root else None, heldout,
+                              anchor, unanchored)
     if "mean" in result:
         log(format_table(result))
         if "affine_fit" in result:
             log("after a per-channel affine fit (EventNeRF's protocol):")
             log(format_table(result["affine_fit"]))
+    if "colour_anchor" in result:
+        log(f"colour anchor: {result['colour_anchor']['label']}")
     if "sharpness" in result:
         log("sharpness of the deblurred frames (Tenengrad, no reference): " + ", ".join(
             f"{m} {v['tenengrad']:.4g}" for m, v in result["sharpness"].items()))
     log(f"outputs in {out}")
     return result
+
+
+def _fmt(values) -> str:
+    return "(" + ", ".join(f"{v:.3g}" for v in values) + ")"
