@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fusiongs.atomic import write_text
+from fusiongs.atomic import remove_temporaries, write_text
 from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_to_outputs
 from fusiongs.eval.evaluate import compare_methods, format_table
 from fusiongs.eval.holdout import format_heldout, frame_subset, holdout_indices, parse_holdout
@@ -248,6 +248,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     fit_scene = dataclasses.replace(scene, frames=frame_subset(scene.frames, kept)) if held.size else scene
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    remove_temporaries(out)  # half-written files of a run killed in this folder (kill -9)
     if needs_pose_stage(fit_scene):  # no trajectory or no intrinsics: EDI + pycolmap first
         fit_scene, calib = run_pose_stage(fit_scene, cfg, out, calib, resume=resume, log=log)
     tr = train(fit_scene, cfg, out, resume=resume, calibration=calib)
