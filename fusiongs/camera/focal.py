@@ -11,7 +11,8 @@ the grid says where the focal length lies and whether the data constrain it at a
   by one bundle adjustment with the focal length free, starting there (kept when it stays within
   half a grid step);
 * the focal length counts as observable when the error rises by ``min_rise`` (relative) at half and
-  at twice the best value (a bundle adjustment that diverges counts as a rise); otherwise the
+  at twice the best value (a bundle adjustment that diverges, or that folds points behind the
+  cameras where the reprojection cost vanishes, counts as a rise); otherwise the
   guess is kept, since any value in the flat valley explains the images equally well.
 """
 
@@ -21,6 +22,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+MAX_BEHIND = 0.01  # share of observations behind their camera above which a solve has failed
 
 
 @dataclass(frozen=True)
@@ -70,8 +73,25 @@ def _adjust(pycolmap, rec, f: float | None, threads: int):
     n = max(int(summary.num_residuals), 1)
     rms = math.sqrt(2.0 * float(summary.ceres_summary.final_cost) / n)
     failed = summary.termination_type == pycolmap.BundleAdjustmentTerminationType.FAILURE
-    ok = not failed and math.isfinite(rms) and rms < 1e3 and _focal(r) > 0
+    ok = (not failed and math.isfinite(rms) and rms < 1e3 and _focal(r) > 0
+          and _behind_share(r) <= MAX_BEHIND)
     return r, (rms if ok else math.inf)
+
+
+def _behind_share(rec) -> float:
+    """Share of the observations whose point lies behind (or on) the observing camera. A bundle
+    adjustment held at a far too short focal length can fold the scene behind the cameras, where
+    the reprojection cost vanishes: such a solve is a failure, not a perfect fit."""
+    w2c = {i: np.asarray(im.cam_from_world().matrix()) for i, im in rec.images.items() if im.has_pose}
+    behind = total = 0
+    for p in rec.points3D.values():
+        x = np.append(np.asarray(p.xyz, np.float64), 1.0)
+        for el in p.track.elements:
+            m = w2c.get(el.image_id)
+            if m is not None:
+                total += 1
+                behind += float(m[2] @ x) <= 0
+    return behind / total if total else 1.0
 
 
 def profile_focal(rec, guess: float, *, octaves: float = 2.0, steps_per_octave: int = 2,

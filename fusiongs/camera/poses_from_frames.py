@@ -1,13 +1,24 @@
 """Intrinsics and a camera trajectory from sharp images at known times (METHOD.md §6).
 
 The images (EDI results at the frames' mid-exposure, or several instants per exposure) are
-registered by COLMAP's incremental structure from motion (pycolmap): SIFT features, exhaustive
+registered by COLMAP's incremental structure from motion (pycolmap). Images narrower than
+``sfm_min_width`` are first enlarged by an integer factor (bicubic): at the simulator's 173x130,
+SIFT finds about 30 features per image, and rotations came out up to 0.9° wrong even from
+perfectly sharp views; at twice the size, 3x as many points and 0.1-0.3° (benchmarks/RESULTS.md,
+"Withheld trajectory"). Then SIFT features, exhaustive
 matching for up to ``exhaustive_max`` images, else sequential neighbours plus loop candidates
 (every ``loop_stride``-th image matched with every other one), one shared camera. A known camera
 is held fixed (PINHOLE). An unknown one is SIMPLE_PINHOLE with the principal point at the centre:
 the model is built with the focal length held at ``1.2 x width``, then a profile of bundle
 adjustments over focal lengths refines it, or keeps the guess when the images do not constrain it
 (:mod:`fusiongs.camera.focal`; shallow hand-held recordings often do not).
+
+Without parallax (a camera on a tripod, or one that only turns) structure from motion cannot
+start. With ``no_parallax`` (the pose stage sets it), the matches decide instead: when every
+matched pair of images is still to within ``static_px`` the camera is static (checked before the
+incremental mapper, which would search for minutes in vain), otherwise, when the mapper fails,
+each image's rotation is fitted to its matches with its best-connected neighbour
+(:func:`fusiongs.camera.sfm.pair_rotation`) and chained; translation is zero either way.
 
 Registered images give camera-to-world poses (OpenCV axes, the trajectory convention of
 FORMAT.md); the ones that failed are interpolated over time (and extrapolated at the ends) between
@@ -27,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from fusiongs.camera.pinhole import PinholeCamera, SceneCamera
+from fusiongs.camera.pinhole import PinholeCamera, SceneCamera, UncalibratedCamera
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.errors import InputError, MissingDependencyError
 
@@ -54,10 +65,17 @@ class PoseOptions:
         median_depth: median depth of the reconstructed points after scaling (scene units).
         threads: CPU threads of COLMAP.
         seed: COLMAP's random seed.
+        sfm_min_width: images narrower than this are enlarged by ``ceil(sfm_min_width / width)``
+            (at most 4) for feature extraction; poses and intrinsics are reported at the input
+            size.
+        no_parallax: when structure from motion cannot reconstruct (too little parallax), return
+            a static or rotation-only camera from the pairwise matches instead of raising.
+        static_px: a camera counts as static when the median shift of the inlier matches of every
+            matched pair is below this (pixels at the input size).
     """
 
     focal_factor: float = 1.2
-    exhaustive_max: int = 60
+    exhaustive_max: int = 30
     overlap: int = 10
     loop_stride: int = 5
     peak_threshold: float = 0.002
@@ -67,6 +85,9 @@ class PoseOptions:
     median_depth: float = 3.0
     threads: int = 2
     seed: int = 0
+    sfm_min_width: int = 320
+    no_parallax: bool = False
+    static_px: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -88,6 +109,9 @@ class PoseReport:
         n_models: models COLMAP built (more than one: the images split into unconnected groups).
         scale: factor applied to COLMAP's units.
         seconds: wall time of the stage.
+        motion: ``"general"`` (structure from motion), ``"rotation"`` (no parallax: rotations
+            from pairwise matches, no translation) or ``"static"`` (every pose the same).
+        upscale: factor the images were enlarged by for feature extraction.
     """
 
     n_images: int
@@ -102,6 +126,8 @@ class PoseReport:
     n_models: int
     scale: float
     seconds: float
+    motion: str = "general"
+    upscale: int = 1
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -152,12 +178,22 @@ def _check_inputs(camera: SceneCamera, images: np.ndarray, times: np.ndarray,
         raise InputError(WHERE, "names", f"{images.shape[0]} unique image names", len(names))
 
 
-def write_sfm_images(images: np.ndarray, folder: Path) -> list[str]:
+def upscale_factor(width: int, min_width: int) -> int:
+    """Integer enlargement for feature extraction: ``ceil(min_width / width)``, 1 to 4."""
+    return int(min(max(-(-int(min_width) // max(int(width), 1)), 1), 4))
+
+
+def write_sfm_images(images: np.ndarray, folder: Path, upscale: int = 1) -> list[str]:
     """Grey 8-bit PNGs for SIFT: luminance scaled by the 99.5th percentile of all images (one
-    scale, so brightness changes stay), then sRGB-encoded. Returns the file names in order."""
+    scale, so brightness changes stay), then sRGB-encoded, enlarged ``upscale`` times (bicubic,
+    pixel centres kept: a point at ``u`` moves to ``upscale u``). Returns the file names in order."""
     import cv2
 
     lum = images.mean(axis=-1).astype(np.float64)
+    if upscale > 1:
+        h, w = lum.shape[1:3]
+        lum = np.stack([cv2.resize(im, (w * upscale, h * upscale), interpolation=cv2.INTER_CUBIC)
+                        for im in lum])
     finite = lum[np.isfinite(lum)]
     top = float(np.percentile(finite, 99.5)) if finite.size else 1.0
     lum = np.clip(np.nan_to_num(lum / max(top, 1e-12)), 0.0, 1.0)
@@ -179,9 +215,19 @@ def _match_pairs(files: list[str], overlap: int, loop_stride: int) -> list[tuple
     return [(files[i], files[j]) for i, j in sorted(pairs)]
 
 
-def _run_colmap(pycolmap, camera: SceneCamera, files: list[str], image_dir: Path, work: Path,
-                opts: PoseOptions) -> dict:
-    """Feature extraction, matching and incremental mapping; all models COLMAP kept."""
+def _scaled(camera: SceneCamera, k: int) -> SceneCamera:
+    """The camera of the enlarged images (pixel centres at +0.5, so every length scales by k)."""
+    if k == 1:
+        return camera
+    if not camera.intrinsics_known:
+        return UncalibratedCamera(camera.width * k, camera.height * k)
+    return PinholeCamera(camera.width * k, camera.height * k, camera.fx * k, camera.fy * k,
+                         camera.cx * k, camera.cy * k, camera.distortion)
+
+
+def _extract_and_match(pycolmap, camera: SceneCamera, files: list[str], image_dir: Path, work: Path,
+                       opts: PoseOptions) -> Path:
+    """SIFT features and verified matches in ``work/database.db`` (returned)."""
     db = work / "database.db"
     db.unlink(missing_ok=True)
     reader = pycolmap.ImageReaderOptions()
@@ -210,6 +256,11 @@ def _run_colmap(pycolmap, camera: SceneCamera, files: list[str], image_dir: Path
         pairing = pycolmap.ImportedPairingOptions()
         pairing.match_list_path = str(pair_file)
         pycolmap.match_image_pairs(db, matching_options=matching, pairing_options=pairing, device=cpu)
+    return db
+
+
+def _map(pycolmap, db: Path, files: list[str], image_dir: Path, work: Path, opts: PoseOptions) -> dict:
+    """Incremental mapping; all models COLMAP kept."""
     mapping = pycolmap.IncrementalPipelineOptions()
     mapping.num_threads = opts.threads
     mapping.random_seed = opts.seed
@@ -327,42 +378,72 @@ def estimate_camera_and_trajectory(camera: SceneCamera, images: np.ndarray, time
     start = time.perf_counter()
     level = pycolmap.logging.minloglevel
     pycolmap.logging.minloglevel = 3  # quiet: a failure is reported as one InputError below
+    k = upscale_factor(camera.width, opts.sfm_min_width)
+    motion, links, recs, best = "general", None, {}, None
     try:
         with tempfile.TemporaryDirectory(prefix="fusiongs_sfm_") as tmp:
             work = Path(work_dir) if work_dir is not None else Path(tmp)
             work.mkdir(parents=True, exist_ok=True)
-            files = write_sfm_images(images, work / "images")
-            recs = _run_colmap(pycolmap, camera, files, work / "images", work, opts)
+            files = write_sfm_images(images, work / "images", k)
+            cam_k = _scaled(camera, k)
+            db = _extract_and_match(pycolmap, cam_k, files, work / "images", work, opts)
+            if opts.no_parallax:
+                from fusiongs.camera.sfm import is_static, verified_matches
+
+                links = verified_matches(db, files)
+                if is_static(links, opts.static_px * k, max(opts.min_inliers // 2, 6)):
+                    motion = "static"
+            if motion == "general":
+                recs = _map(pycolmap, db, files, work / "images", work, opts)
         best = max(recs.values(), key=lambda r: r.num_reg_images(), default=None)
         ok = _model_poses(best, files)[0] if best is not None else np.zeros(len(files), bool)
+        if ok.sum() < opts.min_registered and links is not None:
+            motion = "static" if motion == "static" else "rotation"
+            from fusiongs.camera.sfm import rotation_only_poses
+
+            guess = cam_k if cam_k.intrinsics_known else cam_k.guess(opts.focal_factor)
+            ok, c2w, residual = rotation_only_poses(links, len(files), guess.K(torch.float64).numpy(),
+                                                    static=motion == "static",
+                                                    min_matches=max(opts.min_inliers // 2, 6))
+            residual *= guess.fx / k  # radians -> pixels of the input images
         if ok.sum() < opts.min_registered:
             raise InputError(WHERE, "frames", f"at least {opts.min_registered} images registered by "
                              f"structure from motion (pycolmap) to estimate the camera path; {HINT}",
                              f"{int(ok.sum())} of {len(files)} registered (too little texture or "
                              "parallax: rotation-only motion cannot be reconstructed)")
         prof = None
-        if not camera.intrinsics_known:
+        if not camera.intrinsics_known and motion == "general":
             from fusiongs.camera.focal import profile_focal
 
-            best, prof = profile_focal(best, opts.focal_factor * camera.width, threads=opts.threads)
+            best, prof = profile_focal(best, opts.focal_factor * cam_k.width, threads=opts.threads)
     finally:
         pycolmap.logging.minloglevel = level
-    ok, c2w = _model_poses(best, files)
-    out_cam = camera if prof is None else PinholeCamera(
-        camera.width, camera.height, prof.focal, prof.focal, camera.width / 2, camera.height / 2,
-        camera.distortion)
-    xyz, rgb = _points(best)
-    reg_c2w, xyz, scale = _normalise(c2w[ok], xyz, opts.median_depth)
-    c2w[ok] = reg_c2w
+    if motion == "general":
+        ok, c2w = _model_poses(best, files)
+        xyz, rgb = _points(best)
+        residual = float(best.compute_mean_reprojection_error()) / k
+    else:
+        xyz, rgb = np.zeros((0, 3)), np.zeros((0, 3), np.uint8)
+    if prof is not None:
+        f = prof.focal / k
+        out_cam = PinholeCamera(camera.width, camera.height, f, f, camera.width / 2, camera.height / 2,
+                                camera.distortion)
+    else:
+        out_cam = camera if camera.intrinsics_known else camera.guess(opts.focal_factor)
+    if motion == "general":
+        reg_c2w, xyz, scale = _normalise(c2w[ok], xyz, opts.median_depth)
+        c2w[ok] = reg_c2w
+    else:  # no points and no translation: nothing to scale
+        scale = 1.0
     t_out = times
     if t_range is not None:
         t_out = np.unique(np.concatenate([[min(t_range[0], times[0])], times, [max(t_range[1], times[-1])]]))
     poses = PoseSamples(t=t_out, c2w=fill_poses(times, ok, c2w, t_out))
     report = PoseReport(
-        n_images=len(files), registered=int(ok.sum()), failed=tuple(n for n, k in zip(names, ok) if not k),
+        n_images=len(files), registered=int(ok.sum()), failed=tuple(n for n, g in zip(names, ok) if not g),
         focal=(out_cam.fx, out_cam.fy), focal_estimated=not camera.intrinsics_known,
-        focal_observable=None if prof is None else prof.observable,
-        focal_profile=() if prof is None else prof.grid,
-        reprojection_error_px=float(best.compute_mean_reprojection_error()), n_points=len(xyz),
-        n_models=len(recs), scale=scale, seconds=time.perf_counter() - start)
+        focal_observable=None if camera.intrinsics_known else (prof is not None and prof.observable),
+        focal_profile=() if prof is None else tuple((f / k, e / k) for f, e in prof.grid),
+        reprojection_error_px=residual, n_points=len(xyz), n_models=len(recs), scale=scale,
+        seconds=time.perf_counter() - start, motion=motion, upscale=k)
     return PoseEstimate(out_cam, poses, report, xyz, rgb)

@@ -123,7 +123,9 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
             are registered, which is less reliable).
         thresholds: event thresholds for EDI (:func:`stage_thresholds`); ``None`` estimates them.
         per_exposure: instants registered per exposure (more views, more time).
-        options: :class:`~fusiongs.camera.poses_from_frames.PoseOptions`.
+        options: :class:`~fusiongs.camera.poses_from_frames.PoseOptions` (default: its defaults
+            with ``no_parallax``: a camera on a tripod or one that only turns gets a static or
+            rotation-only path instead of an error).
         work_dir: where COLMAP works (default a temporary folder).
 
     Raises:
@@ -142,7 +144,8 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
               "EDI at mid-exposure" if per_exposure <= 1 else f"EDI at {per_exposure} instants per exposure")
     est = estimate_camera_and_trajectory(scene.camera, images, times, names,
                                          t_range=(float(fs.t_start[0]) - PAD_S, float(fs.t_end[-1]) + PAD_S),
-                                         options=options, work_dir=work_dir)
+                                         options=options or PoseOptions(no_parallax=True),
+                                         work_dir=work_dir)
     poses = scene.poses if scene.poses is not None else est.poses
     new = dataclasses.replace(scene, camera=est.camera, poses=poses)
     return PoseStageResult(new, est, thresholds, source)
@@ -158,8 +161,13 @@ def summary_line(result: PoseStageResult) -> str:
         focal = f"focal {r.focal[0]:.1f} px (estimated)"
     else:
         focal = f"focal {r.focal[0]:.1f} px (the starting guess: the images do not constrain it)"
-    return (f"poses from {result.source}: registered {r.registered}/{r.n_images}, failed: {failed}; "
-            f"{focal}; reprojection error {r.reprojection_error_px:.2f} px; {r.seconds:.1f} s")
+    motion = {"static": "; camera static (no parallax: one pose for every frame)",
+              "rotation": "; camera only turns (no parallax: rotations from the matches, no "
+                          "translation)"}.get(r.motion, "")
+    what = "registered" if r.motion == "general" else "linked by matches"
+    error = "reprojection error" if r.motion == "general" else "median match residual"
+    return (f"poses from {result.source}: {what} {r.registered}/{r.n_images}, failed: {failed}{motion}; "
+            f"{focal}; {error} {r.reprojection_error_px:.2f} px; {r.seconds:.1f} s")
 
 
 def write_pose_outputs(out: str | Path, result: PoseStageResult) -> None:
