@@ -25,7 +25,8 @@ Why two unknowns: with ``theta_+ != theta_-`` texture that moves back and forth 
 count ``N_+ - N_-`` drift while the log intensity returns to its start; one symmetric threshold can
 only absorb that drift by shrinking (METHOD.md section 4). Gates: refractory losses undercount
 fast edges, so pixels whose events come closer than twice the sensor's dead time (the floor of the
-inter-event interval histogram) are left out of a pair; saturated and near-black pixels
+inter-event interval histogram) are left out of a pair, and so are their neighbours, since an
+edge faster than the dead time leaves a single event where it loses the rest; saturated and near-black pixels
 (quantised, compressed by the log offset of the sensor) are left out; hot pixels are spatial
 outliers of the event count. The uncertainty is a bootstrap over spatial tiles.
 
@@ -71,8 +72,15 @@ class CalibrateOptions:
         hot_floor: see ``hot_factor``.
         refractory_gate: pixels with two events closer than this multiple of the estimated dead
             time are left out of a pair (0 disables the gate).
+        refractory_radius: a pixel is also left out of a pair when a pixel within this many
+            pixels is (an edge that crosses a pixel within one dead time leaves a single event
+            there, which no interval can show, while its neighbours show the fast pair).
+        refractory_keep: the neighbour gate is used for a channel only when it keeps at least this
+            fraction of the pairs the pixel's own gate keeps (else the pixel's own gate alone).
+        dead_time_jump: jump factor of the interval histogram that marks the dead time
+            (:func:`dead_time_us`).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
-        iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_sums`).
+        iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_pixel_sums`).
         trim: residuals farther than this many robust standard deviations from their pair's
             median at the starting fit are left out of the IV fit.
         units: residuals in ``"log"`` units, in ``"count"`` units (events), or ``"both"``: the
@@ -95,6 +103,9 @@ class CalibrateOptions:
     hot_factor: float = 5.0
     hot_floor: float = 20.0
     refractory_gate: float = 2.0
+    refractory_radius: int = 1
+    refractory_keep: float = 0.5
+    dead_time_jump: float = 5.0
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
@@ -149,15 +160,18 @@ def hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 20.0) ->
     return (counts > factor * med + floor).reshape(-1)
 
 
-def dead_time_us(events: EventStream, jump: float = 20.0) -> float:
+def dead_time_us(events: EventStream, jump: float = 5.0) -> float:
     """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
     between consecutive events of the same pixel.
 
     A refractory period makes the interval histogram (log-spaced bins) jump at the dead time:
     below it only noise and hot-pixel events meet a pixel's previous event, above it every fast
     edge does. The estimate is the left edge of the first bin holding ``jump`` times more intervals
-    than the mean of the three bins before it (and at least 0.5 % of all intervals); 0 when the
-    histogram has no such jump.
+    than the largest of the three bins before it (and at least 0.5 % of all intervals); 0 when the
+    histogram has no such jump. Background activity that ignores the dead time fills the bins
+    below it (measured on tuning scenes: a 3-5 Hz sensor's jump is 10-15x, not 20x), while a
+    smooth rise of the histogram (a real DAVIS346's pixel bandwidth, with no interval under
+    100 µs and a rise of 2-6x per bin from 1 ms) is no jump against the largest bin before it.
     """
     if len(events) < 2:
         return 0.0
@@ -170,7 +184,7 @@ def dead_time_us(events: EventStream, jump: float = 20.0) -> float:
     edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
     h = np.histogram(dt, edges)[0].astype(np.float64)
     for k in range(1, len(h)):
-        before = h[max(0, k - 3):k].mean()
+        before = h[max(0, k - 3):k].max()
         if h[k] > jump * (before + 1.0) and h[k] >= 0.005 * dt.size:
             return float(edges[k])
     return 0.0
@@ -360,9 +374,9 @@ def log_sharp(data: PairData, theta_pos: float, theta_neg: float) -> torch.Tenso
     return data.log_s - (torch.logsumexp(e, dim=1) - float(np.log(data.n.shape[1])))
 
 
-def _iv_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
-             ) -> torch.Tensor:
-    """Per-tile sums of the instrumental-variable normal equations ``[T, K, K + 1]``.
+def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
+                   ) -> torch.Tensor:
+    """Per-pixel sums of the instrumental-variable normal equations ``[P, K, K + 1]``.
 
     Regressors (``K`` = 4, or 2 without ``offsets``): ``N_+``, ``-N_-``, and the indicators
     ``[N_+ > 0]``, ``-[N_- > 0]`` whose coefficients absorb the part of a threshold a pixel's
@@ -386,8 +400,12 @@ def _iv_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: b
     zs = [centred(v) for v in zs]
     yc = centred(y)
     rows = [torch.stack([(z * x).sum(0) for x in xs] + [(z * yc).sum(0)], -1) for z in zs]  # [P, K+1]
-    per_pix = torch.stack(rows, 1).to(torch.float64)  # [P, K, K + 1]
-    out = torch.zeros(data.n_tiles, len(zs), len(xs) + 1, dtype=torch.float64)
+    return torch.stack(rows, 1).to(torch.float64)
+
+
+def _iv_sums(data: PairData, per_pix: torch.Tensor) -> torch.Tensor:
+    """Per-tile sums ``[T, K, K + 1]`` of :func:`_iv_pixel_sums` (the bootstrap resamples tiles)."""
+    out = torch.zeros(data.n_tiles, *per_pix.shape[1:], dtype=torch.float64)
     out.index_add_(0, data.tile, per_pix)
     return out
 
@@ -418,7 +436,7 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     keep = _inliers(data, log_sharp(data, tp, tn), tp, tn, opts.trim)
     sums = None
     for _ in range(iters):
-        sums = _iv_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets)
+        sums = _iv_sums(data, _iv_pixel_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets))
         new = _solve_iv(sums.sum(0))
         if not (np.isfinite(new[0]) and np.isfinite(new[1]) and new[0] > 0 and new[1] > 0):
             return {"theta_pos": start[0], "theta_neg": start[1], "std_pos": float("nan"),
@@ -571,10 +589,17 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
               for a, b in zip(ts, te)]
     between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)))
                         .reshape(2, -1) for i in range(f - 1)])
-    dead = dead_time_us(events)
+    dead = dead_time_us(events, opts.dead_time_jump)
     gap = opts.refractory_gate * dead
     spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
     bad_pair = _fast_in_spans(events, gap, spans)
+    bad_near = bad_pair
+    if opts.refractory_radius > 0 and gap > 0:
+        from scipy.ndimage import maximum_filter
+
+        size = (1, 2 * opts.refractory_radius + 1, 2 * opts.refractory_radius + 1)
+        bad_near = maximum_filter(bad_pair.reshape(-1, events.height, events.width), size=size,
+                                  mode="nearest").reshape(bad_pair.shape)
     sat = np.asarray(lin.max(axis=-1)).reshape(f, -1) >= opts.saturation
     neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
@@ -589,15 +614,21 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                              f"pixels of channel {names[c]} between the frames", f"{sel.size} pixel(s)")
         if sel.size > opts.max_pixels:
             sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
-        data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
+        data = prepare_channel(sens, counts, between, sel, bad_near, frame_ok, events.width, opts.tile,
                                opts.max_gap, neigh)
+        near_gate = bad_near is not bad_pair
+        if near_gate:
+            own = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
+                                  opts.max_gap, neigh)
+            if int(data.valid.sum()) < opts.refractory_keep * int(own.valid.sum()):
+                data, near_gate = own, False
         res = search_both(data, opts, rng)
         out_p.append(res["theta_pos"])
         out_n.append(res["theta_neg"])
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
-                                            "count_units")})
+                                            "count_units")} | {"neighbour_gate": near_gate})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     return SensorThresholds(names, np.array(out_p), np.array(out_n), np.array(sd_p), np.array(sd_n),

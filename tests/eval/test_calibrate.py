@@ -105,6 +105,49 @@ def test_dead_time_is_the_floor_of_the_interval_histogram():
     assert dead_time_us(ev0) < 100  # Poisson intervals: no refractory floor to find
 
 
+def _bursts_and_noise(n_noise: int, rng: np.random.Generator) -> EventStream:
+    """200 pixels whose own events keep >= 500 µs apart, plus noise events at any interval."""
+    t = np.concatenate([np.cumsum(500 + rng.exponential(300, 300)) for _ in range(200)])
+    pix = np.repeat(np.arange(200), 300)
+    noise_t, noise_p = rng.uniform(0, t.max(), n_noise), rng.integers(0, 200, n_noise)
+    tt, pp = np.concatenate([t, noise_t]), np.concatenate([pix, noise_p])
+    order = np.argsort(tt, kind="stable")
+    return EventStream.create(np.rint(tt[order]), pp[order] % 20, pp[order] // 20, np.ones(tt.size), 20, 10)
+
+
+def test_dead_time_is_found_under_heavy_background_activity():
+    # Noise that ignores the dead time fills the bins below it (as 3-5 Hz of background activity
+    # does on a 173x130 scene): the jump at the floor is ~15x, which a 20x rule missed.
+    ev = _bursts_and_noise(6000, np.random.default_rng(1))
+    assert dead_time_us(ev, jump=20.0) == 0.0
+    assert 420 <= dead_time_us(ev) <= 500
+
+
+def test_a_smooth_rise_of_the_intervals_is_no_dead_time():
+    # Gamma-distributed intervals (shape 12) rise 2-6x per bin toward their mode, as a real
+    # DAVIS346's do from 1 ms (pixel bandwidth, not a refractory floor): no gate must be set from
+    # them. Against the mean of the bins before (not their largest) this rise passes for a jump.
+    rng = np.random.default_rng(2)
+    t = np.concatenate([np.cumsum(rng.gamma(12.0, 400.0, 300)) for _ in range(200)])
+    order = np.argsort(t, kind="stable")
+    pix = np.repeat(np.arange(200), 300)[order]
+    ev = EventStream.create(np.rint(t[order]), pix % 20, pix // 20, np.ones(t.size), 20, 10)
+    assert dead_time_us(ev) == 0.0
+
+
+def test_neighbour_gate_is_used_only_where_it_leaves_enough_pairs(grey_asym):
+    sc = grey_asym.scene
+    used = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_keep=0.0, bootstrap=0))
+    assert used.details["dead_time_us"] > 0
+    assert all(c["neighbour_gate"] for c in used.details["per_channel"])
+    own = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_keep=1.01, bootstrap=0))
+    assert not any(c["neighbour_gate"] for c in own.details["per_channel"])
+    # the neighbours of fast pixels are left out too: fewer pixel pairs in the fit
+    assert used.details["per_channel"][0]["kept"] < own.details["per_channel"][0]["kept"]
+    off = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_radius=0, bootstrap=0))
+    assert not any(c["neighbour_gate"] for c in off.details["per_channel"])
+
+
 def test_hot_pixels_are_spatial_outliers(grey_asym):
     ev = grey_asym.scene.events
     hot = hot_pixels(ev)
