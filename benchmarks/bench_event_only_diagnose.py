@@ -1,0 +1,186 @@
+"""Issue 18 diagnosis: event-only reconstruction with the true log-intensity changes as targets.
+
+The *oracle* run keeps everything of ``fusiongs deblur --config event_only`` (windows, sampled
+pixels, renders, α schedule, intensity anchor, densification) and replaces only the event target:
+instead of ``θ+ n+ − θ− n−`` (or the band loss on counts) each sampled pixel is compared with the
+true change of the log intensity it sees, ``log(I(t_b) + ε) − log(I(t_a) + ε)``, from the
+simulator's own renderer (1 kHz renders, linear in time in between: what the DVS model sees). The
+loss is the mse of the rendered change against it. If the oracle is sharp, the optimiser is not the
+limit; if it is not, the event model is not the (only) limit.
+
+Also reported: the *HPF floor*, the affine-fit PSNR of the leaky-integrator (high-pass filter)
+intensity image that anchors event-only training, at the held-out instants.
+
+Scenes are tuning seeds of the sweep (``fusiongs simulate --sweep-seed N --split tuning``) without
+frames; the hook is installed only in this process (no production code path changes).
+
+    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE OUT [--oracle] [overrides ...]
+    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE --floor
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+# before torch: spinning OpenMP threads made runs 4.5x slower on a shared CPU
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from fusiongs.losses.event import delta_log, sample_event_pixels, select_channel  # noqa: E402
+
+
+def sim_config(scene: Path):
+    """The :class:`SimConfig` a simulated scene was written with (from ``gt/sim.json``)."""
+    from fusiongs.sim.dvs import DVSParams
+    from fusiongs.sim.simulate import SimConfig
+
+    cfg = dict(json.loads((scene / "gt" / "sim.json").read_text())["config"])
+    cfg["dvs"] = DVSParams(**cfg["dvs"])
+    return SimConfig(**cfg)
+
+
+def true_logs(scene: Path) -> tuple[np.ndarray, np.ndarray]:
+    """``(times [K], logs [K, H*W])``: the log intensity each event pixel sees, at the simulator's
+    render rate (cached in ``scene/gt/true_logs.npz``)."""
+    from fusiongs.sim import dvs
+    from fusiongs.sim.simulate import scene_renderer
+
+    cache = scene / "gt" / "true_logs.npz"
+    if cache.is_file():
+        z = np.load(cache)
+        return z["times"], z["logs"]
+    cfg = sim_config(scene)
+    render = scene_renderer(cfg).render
+    times = np.linspace(0.0, cfg.duration, int(round(cfg.duration * cfg.dvs_rate_hz)) + 1)
+    logs = np.stack([dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps) for t in times])
+    np.savez(cache, times=times, logs=logs)
+    return times, logs
+
+
+class TrueLog:
+    """``at(t)``: ``[H*W]`` true log intensity at ``t`` (linear between render instants)."""
+
+    def __init__(self, times: np.ndarray, logs: np.ndarray):
+        self.times, self.logs = times, torch.from_numpy(logs)
+
+    def at(self, t: float) -> torch.Tensor:
+        k = int(np.clip(np.searchsorted(self.times, t) - 1, 0, len(self.times) - 2))
+        w = float((t - self.times[k]) / (self.times[k + 1] - self.times[k]))
+        return (1.0 - w) * self.logs[k] + w * self.logs[k + 1]
+
+
+def install_oracle(truth: TrueLog) -> None:
+    """Replace the training step's event loss by the mse against the true log change (same
+    sampled pixels; grey sensors and colour ``mask`` mode, whole-sensor renders)."""
+    import fusiongs.train.step as step
+    from fusiongs.losses.colour import channel_weights_for
+
+    def oracle_window_loss(state, data, cfg, lin_a, lin_b, t_a, t_b, gen, crop=None):
+        ev = cfg.events
+        counts = data.count_maps(t_a, t_b, lin_a.device)
+        pix = sample_event_pixels(counts, min(ev.pixels, counts[0].numel()), ev.frac_with_events, gen)
+        la, lb = lin_a.reshape(-1, 3)[pix], lin_b.reshape(-1, 3)[pix]
+        target = (truth.at(t_b) - truth.at(t_a))[pix, None].to(lin_a)
+        if data.cfa_index is None:
+            d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
+            return ((d - target) ** 2).mean()
+        if ev.colour_mode != "mask":
+            raise SystemExit("the oracle supports grey sensors and events.colour_mode=mask")
+        ch = data.cfa_index.reshape(-1)[pix]
+        d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)
+        w = channel_weights_for(ch, ev.channel_weights)
+        return (w * (d - target) ** 2).sum() / w.sum()
+
+    step.event_window_loss = oracle_window_loss
+
+
+def install_max_window(seconds: float) -> None:
+    """Cap the free windows' length at ``seconds`` (event-only scenes draw them log-uniform up to
+    the whole recording, since their "frame interval" is the recording's span)."""
+    import fusiongs.train.step as step
+
+    draw = step.sample_free_windows
+
+    def capped(n, t_range, frame_interval, generator=None, min_duration=1e-3):
+        return draw(n, t_range, min(frame_interval, seconds), generator, min(min_duration, seconds))
+
+    step.sample_free_windows = capped
+
+
+def hpf_floor(scene_path: Path, theta0: float = 0.22, tau: float = 0.05) -> dict[str, float]:
+    """Affine-fit PSNR / SSIM of the HPF intensity image (the event-only anchor, built as the
+    trainer builds it) at the held-out instants, against the truth."""
+    from fusiongs.eval.metrics import image_metrics
+    from fusiongs.events.cfa import demosaic
+    from fusiongs.events.hpf import high_pass_filter
+    from fusiongs.frames.image_io import read_image
+    from fusiongs.frames.response import linear_to_srgb
+    from fusiongs.io.scene_io import load_scene
+
+    scene = load_scene(scene_path)
+    names = [r.name for r in scene.renders]
+    times = np.array([r.t for r in scene.renders])
+    v = high_pass_filter(scene.events, times * 1e6, tau=tau, contrast=theta0)  # [K, H, W] log
+    out = []
+    for name, img in zip(names, v):
+        lin = np.exp(img - np.percentile(img, 99))
+        lin = demosaic(lin, scene.events.cfa) if scene.events.cfa else np.repeat(lin[..., None], 3, -1)
+        srgb = linear_to_srgb(np.clip(lin, 0, 1)).astype(np.float32)
+        gt = read_image(scene_path / "gt" / f"{name}.png")
+        out.append(image_metrics(srgb, gt, affine=True, delta_e=False))
+    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+
+
+def summarise(out: Path) -> dict:
+    """Affine-fit and raw PSNR from metrics.json, and the history at a few iterations."""
+    m = json.loads((out / "metrics.json").read_text())
+    rows = [json.loads(line) for line in (out / "history.jsonl").read_text().splitlines()]
+    marks = sorted({0, 299, 599, len(rows) // 2, len(rows) - 1} & set(range(len(rows))))
+    keep = ("iteration", "loss", "event", "intensity", "event_weight", "theta_pos", "theta_neg",
+            "n_gaussians")
+    return {"affine_psnr": m["affine_fit"]["mean"]["novel"]["fusiongs"]["psnr"],
+            "affine_ssim": m["affine_fit"]["mean"]["novel"]["fusiongs"]["ssim"],
+            "raw_psnr": m["mean"]["novel"]["fusiongs"]["psnr"], "seconds": m.get("seconds"),
+            "history": [{k: rows[i].get(k) for k in keep} for i in marks]}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", type=Path)
+    p.add_argument("out", type=Path, nargs="?")
+    p.add_argument("--oracle", action="store_true", help="true log changes as event targets")
+    p.add_argument("--max-window", type=float, default=None, help="cap on free windows (s)")
+    p.add_argument("--floor", action="store_true", help="print the HPF floor and exit")
+    p.add_argument("--config", default="event_only")
+    p.add_argument("overrides", nargs="*")
+    args = p.parse_intermixed_args(argv)
+    torch.set_num_threads(1)
+    if args.floor:
+        print(json.dumps(hpf_floor(args.scene)))
+        return 0
+    from fusiongs.train.pipeline import run_deblur
+
+    if args.oracle:
+        install_oracle(TrueLog(*true_logs(args.scene)))
+    if args.max_window is not None:
+        install_max_window(args.max_window)
+    overrides = ["output.progress=false", *args.overrides, *(["events.loss=mse"] if args.oracle else [])]
+    run_deblur(args.scene, args.out, config=args.config, overrides=overrides, log=lambda *_: None)
+    s = summarise(args.out)
+    (args.out / "diagnose.json").write_text(json.dumps(s, indent=1))
+    print(json.dumps({k: v for k, v in s.items() if k != "history"}))
+    for row in s["history"]:
+        print(json.dumps(row))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
+
