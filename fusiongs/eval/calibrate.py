@@ -160,18 +160,20 @@ def hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 20.0) ->
     return (counts > factor * med + floor).reshape(-1)
 
 
-def dead_time_us(events: EventStream, jump: float = 5.0) -> float:
+def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -> float:
     """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
     between consecutive events of the same pixel.
 
     A refractory period makes the interval histogram (log-spaced bins) jump at the dead time:
     below it only noise and hot-pixel events meet a pixel's previous event, above it every fast
-    edge does. The estimate is the left edge of the first bin holding ``jump`` times more intervals
-    than the largest of the three bins before it (and at least 0.5 % of all intervals); 0 when the
-    histogram has no such jump. Background activity that ignores the dead time fills the bins
-    below it (measured on tuning scenes: a 3-5 Hz sensor's jump is 10-15x, not 20x), while a
-    smooth rise of the histogram (a real DAVIS346's pixel bandwidth, with no interval under
-    100 µs and a rise of 2-6x per bin from 1 ms) is no jump against the largest bin before it.
+    edge does. The estimate is the left edge of the first bin ``k`` holding ``jump`` times more
+    intervals than the largest of the three bins before it, where bins ``k`` and ``k + 1`` together
+    hold at least 0.5 % of all intervals (a dead time inside bin ``k`` splits the step over both)
+    and bin ``k + 2`` holds at most ``plateau`` times the larger of them (a step, not a rise); 0
+    when the histogram has no such step. Background activity that ignores the dead time fills the
+    bins below it (measured on tuning scenes: a 3-5 Hz sensor's step is 10-15x, not 20x), while
+    the smooth rise of a real DAVIS346's intervals (pixel bandwidth: none under 100 µs, then 2-6x
+    more per bin from 1 ms on for several bins) is no step.
     """
     if len(events) < 2:
         return 0.0
@@ -183,9 +185,12 @@ def dead_time_us(events: EventStream, jump: float = 5.0) -> float:
         return 0.0
     edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
     h = np.histogram(dt, edges)[0].astype(np.float64)
-    for k in range(1, len(h)):
+    h = np.concatenate([h, np.zeros(2)])
+    for k in range(1, len(h) - 2):
         before = h[max(0, k - 3):k].max()
-        if h[k] > jump * (before + 1.0) and h[k] >= 0.005 * dt.size:
+        step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
+        if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * dt.size
+                and h[k + 2] <= plateau * step):
             return float(edges[k])
     return 0.0
 

@@ -123,6 +123,20 @@ def test_dead_time_is_found_under_heavy_background_activity():
     assert 420 <= dead_time_us(ev) <= 500
 
 
+def test_a_dead_time_inside_a_bin_is_found():
+    # 957 µs falls inside the 866-1000 µs bin: the step is split over two bins, neither of which
+    # alone is both 5x its predecessors and 0.5 % of the intervals (sparse events, as on a scene
+    # with large thresholds).
+    rng = np.random.default_rng(3)
+    t = np.concatenate([np.cumsum(957 + rng.exponential(20000, 300)) for _ in range(200)])
+    pix = np.repeat(np.arange(200), 300)
+    noise_t, noise_p = rng.uniform(0, t.max(), 3000), rng.integers(0, 200, 3000)
+    tt, pp = np.concatenate([t, noise_t]), np.concatenate([pix, noise_p])
+    order = np.argsort(tt, kind="stable")
+    ev = EventStream.create(np.rint(tt[order]), pp[order] % 20, pp[order] // 20, np.ones(tt.size), 20, 10)
+    assert 850 <= dead_time_us(ev) <= 957
+
+
 def test_a_smooth_rise_of_the_intervals_is_no_dead_time():
     # Gamma-distributed intervals (shape 12) rise 2-6x per bin toward their mode, as a real
     # DAVIS346's do from 1 ms (pixel bandwidth, not a refractory floor): no gate must be set from
