@@ -79,6 +79,9 @@ class CalibrateOptions:
             fraction of the pairs the pixel's own gate keeps (else the pixel's own gate alone).
         dead_time_jump: jump factor of the interval histogram that marks the dead time
             (:func:`dead_time_us`).
+        channel_prior: expected relative spread of the thresholds between CFA channels; each
+            channel's estimate is pooled with the others by its precision
+            (:func:`shrink_channels`; 0 keeps every channel on its own).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
         iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_pixel_sums`).
         trim: residuals farther than this many robust standard deviations from their pair's
@@ -106,6 +109,7 @@ class CalibrateOptions:
     refractory_radius: int = 1
     refractory_keep: float = 0.5
     dead_time_jump: float = 5.0
+    channel_prior: float = 0.05
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
@@ -636,8 +640,38 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                                             "count_units")} | {"neighbour_gate": near_gate})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
-    return SensorThresholds(names, np.array(out_p), np.array(out_n), np.array(sd_p), np.array(sd_n),
-                            True, f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
+    tp, sp = np.array(out_p), np.array(sd_p)
+    tn, sn = np.array(out_n), np.array(sd_n)
+    if len(names) > 1 and opts.channel_prior > 0:
+        details["per_channel_unpooled"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist()}
+        tp, sp = shrink_channels(tp, sp, opts.channel_prior)
+        tn, sn = shrink_channels(tn, sn, opts.channel_prior)
+    return SensorThresholds(names, tp, tn, sp, sn, True,
+                            f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
+
+
+def shrink_channels(theta: np.ndarray, std: np.ndarray, prior: float) -> tuple[np.ndarray, np.ndarray]:
+    """Per-channel thresholds ``[C]`` pulled toward their precision-weighted common value.
+
+    Each channel's log estimate (relative variance ``(std / theta)^2``) is combined with the
+    inverse-variance-weighted mean of all channels under a prior that the channels of one sensor
+    differ by about ``prior`` (relative std): the posterior mean of a normal model. A channel
+    measured on few usable pixels (a dim blue channel behind a Bayer filter) then borrows from the
+    others instead of standing alone; well-measured channels keep their own value. The pixel
+    circuits behind the filters are the same, so large differences between channels are unlikely.
+    A channel without an uncertainty takes the common value.
+
+    Returns:
+        ``(theta [C], std [C])`` after pooling (the std from the posterior variance).
+    """
+    theta, std = np.asarray(theta, np.float64), np.asarray(std, np.float64)
+    rel = np.where(np.isfinite(std) & (std > 0), std / theta, np.inf)
+    w = 1.0 / rel**2
+    lt = np.log(theta)
+    common = float(np.sum(w * lt) / np.sum(w)) if np.sum(w) > 0 else float(lt.mean())
+    post_w = w + 1.0 / prior**2
+    out = np.exp((w * lt + common / prior**2) / post_w)
+    return out, out / np.sqrt(post_w)
 
 
 def _fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.ndarray:

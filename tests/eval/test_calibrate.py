@@ -10,7 +10,13 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate import CalibrateOptions, dead_time_us, estimate_thresholds, hot_pixels
+from fusiongs.eval.calibrate import (
+    CalibrateOptions,
+    dead_time_us,
+    estimate_thresholds,
+    hot_pixels,
+    shrink_channels,
+)
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds, read_calibration, write_calibration
 from fusiongs.frames.frameset import FrameSet
@@ -160,6 +166,21 @@ def test_neighbour_gate_is_used_only_where_it_leaves_enough_pairs(grey_asym):
     assert used.details["per_channel"][0]["kept"] < own.details["per_channel"][0]["kept"]
     off = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_radius=0, bootstrap=0))
     assert not any(c["neighbour_gate"] for c in off.details["per_channel"])
+
+
+def test_a_poorly_measured_channel_borrows_from_the_others():
+    theta = np.array([0.142, 0.124, 0.041])
+    std = np.array([0.004, 0.004, 0.016])  # the third channel: 39 % uncertain
+    out, sd = shrink_channels(theta, std, 0.05)
+    assert np.allclose(out[:2], theta[:2], rtol=0.06)  # well-measured channels keep their values
+    assert 0.12 < out[2] < 0.14  # the uncertain one moves to the common value
+    assert sd[2] < std[2] and np.all(sd > 0)
+    # precise, different channels are left apart
+    out2, _ = shrink_channels(np.array([0.30, 0.36]), np.array([0.001, 0.001]), 0.05)
+    assert np.allclose(out2, [0.30, 0.36], rtol=0.005)
+    # no uncertainty at all: the common value
+    out3, _ = shrink_channels(np.array([0.2, 0.3]), np.array([np.nan, 0.003]), 0.05)
+    assert np.allclose(out3, 0.3, rtol=1e-6)
 
 
 def test_hot_pixels_are_spatial_outliers(grey_asym):
