@@ -157,7 +157,9 @@ def stereo_points(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera
         n_planes: depth hypotheses, uniform in inverse depth.
         window: box-filter side of the cost.
         min_confidence: pixels with a lower :func:`depth_from_cost` confidence are dropped.
-        offsets: index offsets of each view's source views.
+        offsets: index offsets of each view's source views; sources whose camera centre is
+            closer than ``0.5 near / f`` (half a pixel of parallax at the nearest plane) are
+            skipped, and a view without any source gives no points.
 
     Returns:
         ``(xyz [M, 3], colour [M, C], confidence [M])`` float32 on the CPU; ``colour`` is the
@@ -173,12 +175,22 @@ def stereo_points(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera
     depths = inverse_depth_planes(near, far, n_planes)
     pts, cols, confs = [], [], []
     n = images.shape[0]
+    centres = c2w[:, :3, 3].double()
+    # a source view must shift the nearest plane by half a pixel (f b / near >= 0.5): a static or
+    # purely rotating camera gives no depth, and sweeping it would only cost time
+    min_baseline = 0.5 * near / max(float(camera.fx), float(camera.fy))
     for i in range(n):                                                  # loop over views only
         nb = neighbour_indices(n, i, offsets) or [j for j in range(n) if j != i][:1]
+        nb = [j for j in nb if float(torch.linalg.vector_norm(centres[j] - centres[i])) >= min_baseline]
+        if not nb:
+            continue
         cost = plane_sweep_cost(images[i], c2w[i], images[nb], c2w[nb], camera, depths, window)
         depth, conf = depth_from_cost(cost, depths)
         keep = conf >= min_confidence
         pts.append(unproject(depth, c2w[i], camera)[keep])
         cols.append(images[i].float()[keep])
         confs.append(conf[keep])
+    if not pts:  # no view had a source with parallax
+        c = images.shape[-1]
+        return torch.zeros(0, 3), torch.zeros(0, c), torch.zeros(0)
     return torch.cat(pts), torch.cat(cols), torch.cat(confs)

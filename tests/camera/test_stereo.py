@@ -107,6 +107,19 @@ def test_stereo_points_are_on_surfaces_with_their_pixel_colour(views):
     assert set(rgb.reshape(-1).tolist()) <= set(images.reshape(-1).tolist())
 
 
+def test_views_without_parallax_give_no_points(views):
+    cam, c2w, images, _ = views
+    static = c2w[:1].expand(4, 4, 4).clone()  # a camera on a tripod: one pose for every frame
+    xyz, rgb, conf = stereo_points(images[:4], static, cam, 1.0, 12.0, n_planes=8)
+    assert xyz.shape == (0, 3) and rgb.shape == (0, images.shape[-1]) and conf.shape == (0,)
+    # six views, the last one moved: with sources up to 3 apart, views 0 and 1 have only static
+    # sources and give nothing; views 2-5 give every pixel (no confidence cut)
+    mixed = c2w[:1].expand(6, 4, 4).clone()
+    mixed[5] = c2w[5]
+    xyz2, _, _ = stereo_points(images[:6], mixed, cam, 1.0, 12.0, n_planes=8, min_confidence=0.0)
+    assert xyz2.shape[0] == 4 * cam.height * cam.width
+
+
 def test_neighbours_stay_inside():
     assert neighbour_indices(5, 0, (-2, -1, 1, 2)) == [1, 2]
     assert neighbour_indices(5, 4, (-2, -1, 1, 2)) == [2, 3]
