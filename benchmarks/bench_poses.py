@@ -42,6 +42,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from benchmarks.bench_deblur import run_one  # noqa: E402
 from fusiongs.camera.poses_from_frames import fill_poses  # noqa: E402
 from fusiongs.camera.sfm import pose_errors  # noqa: E402
 from fusiongs.camera.tum import read_tum  # noqa: E402
@@ -132,22 +133,6 @@ def run_pose_stage_only(scene: Path, out: Path, config: str, overrides: list[str
     return doc
 
 
-def deblur(scene: Path, out: Path, config: str, overrides: list[str], reuse: bool) -> dict:
-    """``fusiongs deblur`` (read back from ``out/bench_result.json`` with ``reuse``)."""
-    from fusiongs.train.pipeline import run_deblur
-
-    saved = out / "bench_result.json"
-    key = {"config": config, "overrides": overrides, "scene": str(scene)}
-    if reuse and saved.is_file() and json.loads(saved.read_text()).get("key") == key:
-        return json.loads(saved.read_text())["result"]
-    t0 = time.perf_counter()
-    result = run_deblur(scene, out, config=config, overrides=["output.progress=false", *overrides],
-                        log=lambda *_: None)
-    result["wall_seconds"] = time.perf_counter() - t0
-    saved.write_text(json.dumps({"key": key, "result": result}, indent=2))
-    return result
-
-
 def bench_scene(scene: Path, root: Path, args) -> dict:
     """Pose stage (and with ``--deblur`` both trainings) on one scene; the row's figures."""
     s = load_scene(scene, load_events=False)
@@ -172,8 +157,8 @@ def bench_scene(scene: Path, root: Path, args) -> dict:
            "focal_observable": rep["focal_observable"], "reprojection_px": rep["reprojection_error_px"],
            "points": rep["n_points"], "pose_seconds": stage["wall_seconds"]}
     if args.deblur:
-        ref = deblur(scene, root / "runs" / f"{scene.name}_true", args.config, args.overrides, args.reuse)
-        run = deblur(held, root / "runs" / f"{scene.name}_withheld", args.config, args.overrides,
+        ref = run_one(scene, root / "runs" / f"{scene.name}_true", args.config, args.overrides, args.reuse)
+        run = run_one(held, root / "runs" / f"{scene.name}_withheld", args.config, args.overrides,
                      args.reuse)
         refined = read_tum(root / "runs" / f"{scene.name}_withheld" / "trajectory.txt")
         row.update(refined=score(refined, s.poses, mids, extent),
