@@ -9,10 +9,12 @@ so a crafted ``checkpoint.pt`` cannot run code (a plain ``pickle`` load would ru
 
 from __future__ import annotations
 
+import contextlib
 import pickle
 import re
 import warnings
 from collections import OrderedDict
+from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +22,7 @@ import numpy as np
 import torch
 
 from fusiongs.atomic import atomic_path
-from fusiongs.errors import InputError
+from fusiongs.errors import FusionGSError, InputError
 
 FORMAT = "fusiongs-checkpoint"
 VERSION = 1
@@ -106,6 +108,20 @@ def load_checkpoint(path: str | Path) -> dict[str, Any]:
         if key not in data:
             raise InputError(path, key, "present in the checkpoint", "missing")
     return data
+
+
+@contextlib.contextmanager
+def checkpoint_errors(path: str | Path) -> Iterator[None]:
+    """Turn what a readable but incomplete or foreign checkpoint makes the restoring code raise
+    (a missing key, a tensor of another shape, a value of the wrong type) into one
+    :class:`InputError` line naming the file."""
+    try:
+        yield
+    except FusionGSError:  # already one line
+        raise
+    except (KeyError, RuntimeError, TypeError, ValueError, AttributeError) as e:
+        raise InputError(path, "checkpoint", "a complete fusiongs checkpoint of this run",
+                         f"{type(e).__name__}: {str(e).splitlines()[0][:120] if str(e) else ''}") from None
 
 
 def _refused(e: Exception) -> str:

@@ -10,17 +10,16 @@ import torch
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
-from fusiongs.errors import InputError
 from fusiongs.losses.threshold import ContrastThreshold
 from fusiongs.scene.gaussians import GaussianModel
-from fusiongs.train.checkpoint import load_checkpoint
+from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint
 from fusiongs.train.state import FusionState
 
 
 def restore_state(path: str | Path) -> tuple[FusionState, PinholeCamera, dict]:
     """``(state, camera, config dict)`` of the run saved at ``path`` (on the CPU)."""
     ckpt = load_checkpoint(path)
-    try:
+    with checkpoint_errors(path):
         cam = ckpt["camera"]
         dist = tuple(cam["distortion"]) if cam.get("distortion") else None
         camera = PinholeCamera(**{**cam, "distortion": dist})
@@ -42,7 +41,4 @@ def restore_state(path: str | Path) -> tuple[FusionState, PinholeCamera, dict]:
         state = FusionState(model, trajectory, threshold, int(ckpt["log_gain"].numel()), False)
         with torch.no_grad():
             state.log_gain.copy_(ckpt["log_gain"])
-    except (KeyError, RuntimeError, TypeError) as e:
-        raise InputError(path, "checkpoint", "a complete fusiongs checkpoint",
-                         f"{type(e).__name__}: {str(e).splitlines()[0][:120]}") from None
     return state, camera, ckpt["config"]

@@ -30,7 +30,7 @@ from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
 from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
-from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
+from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
 from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data, pvc_readouts
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
@@ -193,26 +193,27 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     order = torch.randperm(max(data.n_frames, 1), generator=gen, device=gen.device).tolist()
     ckpt_path = out_dir / "checkpoint.pt"
     ckpt = load_checkpoint(ckpt_path) if resume and ckpt_path.exists() else None
-    if ckpt is not None:
-        _restore(ckpt, state)
-        start = int(ckpt["iteration"])
-        history = History(**ckpt["history"])
-        gen.set_state(ckpt["generator"])
-        saved = ckpt.get("device_generator", {})
-        if saved.get("device") == device_gen.device.type:  # else (another device) freshly seeded
-            device_gen.set_state(saved["state"])
-    opts = _optimizers(state, cfg, extent)
-    if ckpt is not None:
-        for k, o in opts.items():
-            if k in ckpt.get("optimizers", {}):
-                o.load_state_dict(ckpt["optimizers"][k])
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
     psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
-    if ckpt is not None:
-        if "densify" in ckpt:  # statistics since the last refinement, the split generator
-            strategy.load_state_dict(ckpt["densify"], state.model.means.device)
-        if ckpt.get("psnr_running") is not None:
-            psnr_now = ckpt["psnr_running"].to(device)
+    if ckpt is None:
+        opts = _optimizers(state, cfg, extent)
+    else:
+        with checkpoint_errors(ckpt_path):  # a foreign or edited checkpoint: one line, not a trace
+            _restore(ckpt, state)
+            start = int(ckpt["iteration"])
+            history = History(**ckpt["history"])
+            gen.set_state(ckpt["generator"])
+            saved = ckpt.get("device_generator", {})
+            if saved.get("device") == device_gen.device.type:  # else (another device) freshly seeded
+                device_gen.set_state(saved["state"])
+            opts = _optimizers(state, cfg, extent)
+            for k, o in opts.items():
+                if k in ckpt.get("optimizers", {}):
+                    o.load_state_dict(ckpt["optimizers"][k])
+            if "densify" in ckpt:  # statistics since the last refinement, the split generator
+                strategy.load_state_dict(ckpt["densify"], state.model.means.device)
+            if ckpt.get("psnr_running") is not None:
+                psnr_now = ckpt["psnr_running"].to(device)
     tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
     # a bar on a terminal only: a log or CI gets pipeline.run_deblur's one summary line
     tty = sys.stderr is not None and sys.stderr.isatty()

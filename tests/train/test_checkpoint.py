@@ -142,3 +142,17 @@ def test_deblur_resume_on_a_truncated_checkpoint_is_one_line(tiny_scene, tmp_pat
     save_checkpoint(tmp_path / "full.pt", _payload())
     (tmp_path / "checkpoint.pt").write_bytes((tmp_path / "full.pt").read_bytes()[:300])
     assert "unreadable" in _deblur_resume(tiny_scene, tmp_path, capsys)
+
+
+@pytest.mark.parametrize("edit", ["generator", "densify", "model"])
+def test_deblur_resume_on_a_foreign_checkpoint_is_one_line(tiny_scene, tiny_run, tmp_path, capsys, edit):
+    # readable, of the right format, but not what this run saved: one line naming the file
+    ckpt = load_checkpoint(tiny_run / "checkpoint.pt")
+    if edit == "generator":
+        ckpt["generator"] = torch.zeros(3, dtype=torch.uint8)
+    elif edit == "densify":
+        ckpt["densify"] = {"grad2d": "not a tensor"}
+    else:
+        ckpt["model"] = {}  # no Gaussian parameters
+    save_checkpoint(tmp_path / "checkpoint.pt", ckpt)
+    assert "a complete fusiongs checkpoint" in _deblur_resume(tiny_scene, tmp_path, capsys)
