@@ -79,15 +79,19 @@ def calibrate_row(scene_dir: Path, opts: CalibrateOptions) -> dict:
 
 
 def deblur_row(scene_dir: Path, out: Path, config: str | None, overrides: list[str]) -> dict:
-    """Deblur-view PSNR of blurry / EDI (true θ) / EDI (estimated θ) / fusiongs no events / fusiongs."""
-    from fusiongs.train.pipeline import run_deblur
+    """Deblur-view PSNR of blurry / EDI (true θ) / EDI (estimated θ) / fusiongs no events / fusiongs.
+
+    Runs go through :func:`bench_deblur.run_one` with ``reuse``: a finished run with the same
+    settings is read back, so an interrupted sweep resumes where it stopped.
+    """
+    from benchmarks.bench_deblur import run_one
 
     res = {}
     for key, extra in (("no_events", ["events.enabled=false"]), ("fusiongs", [])):
-        r = run_deblur(scene_dir, out / key, config=config,
-                       overrides=["output.progress=false", *overrides, *extra], log=lambda *_: None)
+        r = run_one(scene_dir, out / key, config, [*overrides, *extra], reuse=True)
         m = r["mean"]["deblur"]
         res[key] = m["fusiongs"]["psnr"]
+        res[f"seconds_{key}"] = r["wall_seconds"]
         if key == "fusiongs":
             for peer in ("blurry", "edi", "edi_true_theta"):
                 res[peer] = m[peer]["psnr"] if peer in m else float("nan")

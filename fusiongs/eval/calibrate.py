@@ -46,6 +46,7 @@ import torch
 from fusiongs.errors import InputError
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
+from fusiongs.events.stats import fast_event_mask
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
 from fusiongs.frames.frameset import FrameSet
@@ -201,19 +202,17 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -
 
 def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) -> np.ndarray:
     """``[len(edges) - 1, H*W]`` int32 number of events closer than ``gap_us`` to the previous event
-    of the same pixel, per time segment ``[edges[j], edges[j+1])``."""
+    of the same pixel (:func:`~fusiongs.events.stats.fast_event_mask`), per time segment
+    ``[edges[j], edges[j+1])``."""
     hw = events.height * events.width
     out = np.zeros((len(edges_us) - 1, hw), np.int32)
-    if gap_us <= 0 or len(events) < 2:
+    fast = fast_event_mask(events, gap_us)
+    if not fast.any():
         return out
-    pix = events.y.astype(np.int64) * events.width + events.x
-    order = np.argsort(pix, kind="stable")
-    ps, ts = pix[order], events.t[order]
-    fast = np.zeros(len(events), bool)
-    fast[1:] = (ps[1:] == ps[:-1]) & ((ts[1:] - ts[:-1]) < gap_us)
-    seg = np.searchsorted(edges_us, ts[fast], side="right") - 1
+    pix = (events.y.astype(np.int64) * events.width + events.x)[fast]
+    seg = np.searchsorted(edges_us, events.t[fast], side="right") - 1
     ok = (seg >= 0) & (seg < len(edges_us) - 1)
-    np.add.at(out, (seg[ok], ps[fast][ok]), 1)
+    np.add.at(out, (seg[ok], pix[ok]), 1)
     return out
 
 

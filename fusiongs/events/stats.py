@@ -29,6 +29,21 @@ def time_gaps(t: np.ndarray, factor: float = 10.0,
     return t[i], dt[i], thr
 
 
+def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
+    """``[E]`` bool, in stream order: the event follows the previous event of the same pixel by
+    less than ``gap_us`` µs (either polarity). With a refractory period, such events mark pixels
+    whose log intensity changed faster than the sensor could report: their counts are lower bounds.
+    """
+    fast = np.zeros(len(events), bool)
+    if gap_us <= 0 or len(events) < 2:
+        return fast
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")  # time order kept within each pixel
+    ps, ts = pix[order], events.t[order]
+    fast[order[1:]] = (ps[1:] == ps[:-1]) & ((ts[1:] - ts[:-1]) < gap_us)
+    return fast
+
+
 def hot_pixels(counts: np.ndarray, factor: float = 20.0) -> tuple[np.ndarray, np.ndarray, float]:
     """Pixels firing far more than a typical active pixel.
 

@@ -103,6 +103,28 @@ def _weighted_mean(per_elem: torch.Tensor, channel_weights: torch.Tensor | None)
     return (w * per_elem).sum() / w.sum()
 
 
+def censored_residual(residual: torch.Tensor, target: torch.Tensor, censored: torch.Tensor) -> torch.Tensor:
+    """Residual of a count that is only a lower bound: zero when the prediction goes further.
+
+    A pixel that fired faster than its refractory period allows lost events, so its count bounds
+    the log change from below in the direction of the target's sign: ``|d_hat| >= |target|`` is
+    consistent with it. Where ``censored`` (and the target is nonzero) only the shortfall
+    ``sign(target) * r < 0`` is kept, the one-sided (Tobit) treatment of a censored observation
+    (Tobin, Econometrica 1958); elsewhere the residual is unchanged.
+
+    Args:
+        residual: ``[P, C']`` ``d_hat - target``.
+        target: ``[P, C']`` the count target ``theta_+ n_+ - theta_- n_-``.
+        censored: bool broadcastable to ``[P, C']``.
+
+    Returns:
+        ``[P, C']`` residual.
+    """
+    short = torch.sign(target) * residual < 0
+    keep = ~censored | (target == 0) | short
+    return torch.where(keep, residual, torch.zeros_like(residual))
+
+
 def event_loss_mse(
     delta_pred: torch.Tensor,
     n_pos: torch.Tensor,
@@ -110,6 +132,7 @@ def event_loss_mse(
     theta_pos: torch.Tensor,
     theta_neg: torch.Tensor,
     channel_weights: torch.Tensor | None = None,
+    censored: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Squared error of the log change against ``theta_+ n_+ - theta_- n_-`` (EventNeRF Eq. 5).
 
@@ -123,12 +146,18 @@ def event_loss_mse(
         n_pos, n_neg: ``[P, C']`` positive / negative event counts of the window (float).
         theta_pos, theta_neg: thresholds broadcastable to ``[P, C']`` (``[C']`` or ``[P, C']``).
         channel_weights: weights broadcastable to ``[P, C']``, or None for a plain mean.
+        censored: bool broadcastable to ``[P, C']``: counts that are lower bounds (the pixel hit
+            its refractory period in the window), compared one-sided (:func:`censored_residual`);
+            None for none.
 
     Returns:
         Scalar loss in (log units)^2.
     """
     target = theta_pos * n_pos - theta_neg * n_neg
-    return _weighted_mean((delta_pred - target) ** 2, channel_weights)
+    r = delta_pred - target
+    if censored is not None:
+        r = censored_residual(r, target, censored)
+    return _weighted_mean(r**2, channel_weights)
 
 
 def band_penalty(d_r: torch.Tensor, d_gt: torch.Tensor, beta: float, zero_tol: float = 0.0) -> torch.Tensor:

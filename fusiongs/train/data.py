@@ -51,6 +51,8 @@ class TrainData:
     pvc_times: torch.Tensor | None = None  # [R] float64 s: read-outs of the pvc targets
     pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
     event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
+    fast_t: np.ndarray | None = None  # [E_f] int64 µs of the fast events (censored counts), host
+    fast_index: torch.Tensor | None = None  # [E_f] int64 flat pixel index of the fast events, device
 
     _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
 
@@ -86,6 +88,37 @@ class TrainData:
         counts = torch.zeros(2 * h * w, dtype=torch.float32, device=idx.device)
         counts.index_add_(0, idx, torch.ones(idx.shape[0], dtype=torch.float32, device=idx.device))
         return counts.reshape(2, h, w).to(device)
+
+
+    def censored_map(self, t_a: float, t_b: float, radius: int = 0) -> torch.Tensor | None:
+        """``[H, W]`` bool: pixels with a fast event (:func:`fast_events`) in ``[t_a, t_b)``
+        seconds, or within ``radius`` pixels (Chebyshev) of one, whose counts there are lower
+        bounds; None when no fast events were marked.
+
+        The neighbours count because an edge faster than the dead time leaves single events on
+        pixels it crosses (no fast pair there) while its neighbours show the pairs."""
+        if self.fast_t is None or self.fast_index is None or self.events is None:
+            return None
+        i0, i1 = np.searchsorted(self.fast_t, [int(round(t_a * 1e6)), int(round(t_b * 1e6))])
+        h, w = self.events.height, self.events.width
+        out = torch.zeros(h * w, dtype=torch.float32, device=self.fast_index.device)
+        out[self.fast_index[int(i0):int(i1)]] = 1.0
+        out = out.reshape(1, 1, h, w)
+        if radius > 0:
+            out = torch.nn.functional.max_pool2d(out, 2 * radius + 1, stride=1, padding=radius)
+        return out[0, 0] > 0
+
+
+def fast_events(events: EventStream, gap_us: float, device: torch.device
+                ) -> tuple[np.ndarray, torch.Tensor]:
+    """Times (host, µs) and flat pixel indices (on ``device``) of the events that follow their
+    pixel's previous event by less than ``gap_us``: where the sensor's refractory period may have
+    swallowed events (:func:`~fusiongs.events.stats.fast_event_mask`)."""
+    from fusiongs.events.stats import fast_event_mask
+
+    m = fast_event_mask(events, gap_us)
+    flat = events.y[m].astype(np.int64) * events.width + events.x[m]
+    return np.ascontiguousarray(events.t[m], np.int64), torch.from_numpy(flat).to(device)
 
 
 def event_indices(events: EventStream, device: torch.device) -> torch.Tensor:

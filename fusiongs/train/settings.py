@@ -87,6 +87,14 @@ class EventSettings:
     grey_weights: tuple[float, float, float] = (0.299, 0.587, 0.114)
     log_eps: float = 1e-3            # ε in log(I + ε), in units of the linear radiance range
     hpf_tau: float = 0.05            # τ of the high-pass filter for the pvc target (s)
+    censor: float = 2.0              # counts of pixels with two events closer than this multiple of
+                                     # the estimated dead time are lower bounds (one-sided mse); 0 off
+    censor_radius: int = 0           # ... and those of their neighbours within this many pixels
+
+    def __post_init__(self) -> None:
+        _need_positive("events", self, ("censor",), zero_ok=True)
+        if self.censor_radius < 0:
+            raise ConfigError("config", "events.censor_radius", "an integer >= 0", repr(self.censor_radius))
 
 
 @dataclass

@@ -114,6 +114,10 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     signed = crop.maps(full_signed)
     th = state.threshold
     t_mid = 0.5 * (t_a + t_b)  # for a drifting θ
+    censored = None  # [P, 1] counts that are lower bounds (grey and mask modes)
+    if ev.loss == "mse" and (data.cfa_index is None or ev.colour_mode == "mask"):
+        cens = data.censored_map(t_a, t_b, ev.censor_radius)
+        censored = None if cens is None else cens.reshape(-1)[full_pix, None]
     if data.cfa_index is None:  # grey sensor: I = w · L
         d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
         th_p, th_n = th.theta(full_pix, t=t_mid)
@@ -137,7 +141,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
         # made on the host, copied without waiting (torch.tensor(..., device=cuda) would wait)
         weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device="cpu").to(device, non_blocking=True)
     if ev.loss == "mse":
-        return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights)
+        return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights, censored)
     if ev.loss == "band":
         return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights)
     return event_loss_pvc(d, d_gt, th_p, th_n, kind="band", beta=ev.beta, channel_weights=weights)

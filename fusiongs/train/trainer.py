@@ -181,6 +181,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         eo = cfg.event_only
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
                                               eo.intensity_tau, cfg.threshold.init, device)
+    if cfg.events.censor > 0 and data.events is not None:
+        data.fast_t, data.fast_index = censor_events(data, cfg, theta0, device)
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
@@ -311,6 +313,22 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
         print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
               f"{cfg.threshold.init}", file=sys.stderr)
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
+
+
+def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
+                  device: torch.device) -> tuple[np.ndarray | None, torch.Tensor | None]:
+    """The fast events whose pixels' counts are lower bounds (``events.censor`` times the dead
+    time; the calibration's estimate, else measured here); ``(None, None)`` when the stream shows
+    no refractory floor."""
+    from fusiongs.eval.calibrate import dead_time_us
+    from fusiongs.train.data import fast_events
+
+    dead = theta0.details.get("dead_time_us")
+    if not isinstance(dead, int | float):
+        dead = dead_time_us(data.events)
+    if not dead or dead <= 0:
+        return None, None
+    return fast_events(data.events, cfg.events.censor * float(dead), device)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

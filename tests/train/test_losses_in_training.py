@@ -80,3 +80,37 @@ def test_threshold_starts_from_the_calibration_unless_disabled(colour_scene):
     given = SensorThresholds.uniform(0.2, 0.4, None)  # a grey calibration serves every channel
     np.testing.assert_allclose(initial_theta(colour_scene, data, off, given).as_array(),
                                [[0.2] * 3, [0.4] * 3])
+
+
+def test_censored_counts_train_on_a_refractory_sensor(tmp_path):
+    """``events.censor``: the fast events of a sensor with a dead time mark censored counts and the
+    run trains (grey and mask mode); with ``events.censor=0`` nothing is marked."""
+    from fusiongs.sim.dvs import DVSParams
+
+    def scene(refractory, cfa):
+        dvs = DVSParams(theta_on=0.1, theta_off=0.1, refractory_s=refractory)
+        return run_simulation(SimConfig(preset="boxes", width=24, height=18, duration=0.1, frames=2,
+                                        exposure=0.03, dvs_rate_hz=2000.0, blur_samples=4,
+                                        supersample=1, novel=1, seed=2, cfa=cfa, dvs=dvs)).scene
+
+    cfg = resolve_config(None, BASE + ["events.censor=2.0", "threshold.estimate=false"])
+    for cfa in (None, "RGGB"):
+        tr = train(scene(2e-3, cfa), cfg, tmp_path / str(cfa))
+        assert tr.data.fast_t is not None and tr.data.fast_t.size > 0
+        assert all(math.isfinite(v) for v in tr.history.loss)
+        assert all(math.isfinite(v) for v in tr.history.event[3:])
+        # the window map marks exactly the pixels of the fast events in it, and radius 1 their
+        # 3x3 neighbourhoods (scipy's maximum filter as the reference)
+        from scipy.ndimage import maximum_filter
+
+        t0, t1 = 0.02, 0.06
+        sel = (tr.data.fast_t >= t0 * 1e6) & (tr.data.fast_t < t1 * 1e6)
+        ref = np.zeros(24 * 18, bool)
+        ref[tr.data.fast_index.numpy()[sel]] = True
+        ref = ref.reshape(18, 24)
+        assert ref.any()
+        assert np.array_equal(tr.data.censored_map(t0, t1).numpy(), ref)
+        assert np.array_equal(tr.data.censored_map(t0, t1, 1).numpy(),
+                              maximum_filter(ref, size=3, mode="constant"))
+    off = resolve_config(None, BASE + ["events.censor=0", "threshold.estimate=false"])
+    assert train(scene(2e-3, None), off, tmp_path / "off").data.fast_t is None
