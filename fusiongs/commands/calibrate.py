@@ -62,6 +62,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(calibration_document(th, **extra)))
         return 0
     print(format_table(th, truth))
+    dead = th.details.get("dead_time_us")
+    if isinstance(dead, int | float):
+        print(f"dead time (floor of the intervals between a pixel's events): {dead:.0f} µs; deblur takes the "
+              "counts of pixels firing faster than 2x it as lower bounds" if dead > 0 else
+              "dead time: no refractory floor in the event intervals (no counts are censored)")
     if not th.scale_known:
         print("note: no frames, so the thresholds are known only up to a common scale: the ON/OFF "
               f"ratio is measured, the scale assumed ({th.details.get('assumed_scale')})", file=sys.stderr)
