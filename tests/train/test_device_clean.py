@@ -51,6 +51,7 @@ HOST_SIDE = {
     ("fusiongs/train/data.py", "hpf_images"): "numpy -> tensor, once",
     ("fusiongs/train/data.py", "pvc_readouts"): "numpy -> tensor, once",
     ("fusiongs/train/data.py", "edi_images"): "numpy -> tensor, once",
+    ("fusiongs/train/data.py", "fast_events"): "numpy -> tensor, once (the censored counts' events)",
     ("fusiongs/train/trainer.py", "init_images"): "numpy -> tensor for the host stereo, once",
     ("fusiongs/losses/colour.py", "cfa_index"): "numpy -> tensor, once (then .to(device))",
     # checkpoints hold host tensors by definition (written every checkpoint_every iterations)
