@@ -65,7 +65,8 @@ def run(args: argparse.Namespace) -> int:
     dead = th.details.get("dead_time_us")
     if isinstance(dead, int | float):
         print(f"dead time (floor of the intervals between a pixel's events): {dead:.0f} µs; deblur takes the "
-              "counts of pixels firing faster than 2x it as lower bounds" if dead > 0 else
+              "counts of pixels firing faster than events.censor (default 2) times it as lower bounds"
+              if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
     if not th.scale_known:
         print("note: no frames, so the thresholds are known only up to a common scale: the ON/OFF "

@@ -89,7 +89,6 @@ class TrainData:
         counts.index_add_(0, idx, torch.ones(idx.shape[0], dtype=torch.float32, device=idx.device))
         return counts.reshape(2, h, w).to(device)
 
-
     def censored_map(self, t_a: float, t_b: float, radius: int = 0) -> torch.Tensor | None:
         """``[H, W]`` bool: pixels with a fast event (:func:`fast_events`) in ``[t_a, t_b)``
         seconds, or within ``radius`` pixels (Chebyshev) of one, whose counts there are lower

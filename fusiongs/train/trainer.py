@@ -323,10 +323,10 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     from fusiongs.eval.calibrate import dead_time_us
     from fusiongs.train.data import fast_events
 
-    dead = theta0.details.get("dead_time_us")
-    if not isinstance(dead, int | float):
+    dead = theta0.details.get("dead_time_us")  # a calibration.json may come from elsewhere
+    if isinstance(dead, bool) or not isinstance(dead, int | float) or not math.isfinite(dead):
         dead = dead_time_us(data.events)
-    if not dead or dead <= 0:
+    if dead <= 0:
         return None, None
     return fast_events(data.events, cfg.events.censor * float(dead), device)
 

@@ -51,3 +51,22 @@ def test_unknown_names_and_missing_paths_list_the_presets(value):
 def test_repository_configs_folder_links_to_the_package_presets(name):
     linked = REPO_ROOT / "configs" / f"{name}.yaml"
     assert linked.is_file() and linked.samefile(config_dir() / f"{name}.yaml")
+
+
+@pytest.mark.parametrize("name", PRESETS)
+def test_presets_have_no_repeated_keys(name):
+    """PyYAML keeps the last of two equal keys silently; a preset must say each key once."""
+    import yaml
+
+    class Strict(yaml.SafeLoader):
+        pass
+
+    def mapping(loader, node):
+        keys = [loader.construct_object(k) for k, _ in node.value]
+        repeated = {k for k in keys if keys.count(k) > 1}
+        assert not repeated, f"{name}.yaml repeats {sorted(repeated)}"
+        return loader.construct_mapping(node)
+
+    Strict.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
+    path = Path(config_dir()) / f"{name}.yaml"
+    assert isinstance(yaml.load(path.read_text(), Loader=Strict), dict)
