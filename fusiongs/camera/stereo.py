@@ -194,3 +194,27 @@ def stereo_points(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera
         c = images.shape[-1]
         return torch.zeros(0, 3), torch.zeros(0, c), torch.zeros(0)
     return torch.cat(pts), torch.cat(cols), torch.cat(confs)
+
+
+def far_bound(xyz: torch.Tensor, centres: torch.Tensor, least: float, most: float,
+              quantile: float = 0.9, margin: float = 1.25) -> float:
+    """A scene's far bound from its stereo points: ``margin`` times the ``quantile`` of their
+    distances to the nearest camera centre, never below ``least`` nor above ``most``.
+
+    A high quantile rather than the maximum: a plane sweep that reaches far beyond the scene puts
+    its few weakly textured or low-parallax matches at the farthest planes.
+
+    Args:
+        xyz: ``[M, 3]`` points (e.g. :func:`stereo_points`), scene units.
+        centres: ``[N, 3]`` camera centres.
+        least, most: clamp of the bound (``least`` alone when there are no points).
+
+    Returns:
+        The far bound (scene units).
+    """
+    if xyz.shape[0] == 0:
+        return float(least)
+    dist = torch.cdist(xyz.double(), centres.double().to(xyz.device)).amin(1)
+    k = min(max(1, round(quantile * dist.numel())), dist.numel())  # kthvalue: no size limit
+    q = float(dist.kthvalue(k).values)
+    return float(min(max(margin * q, least), most))

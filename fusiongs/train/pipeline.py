@@ -266,7 +266,8 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     h = tr.history
     log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "
         f"render forward {h.render_seconds / max(h.seconds, 1e-9):.0%}, backward "
-        f"{h.backward_seconds / max(h.seconds, 1e-9):.0%}), {tr.state.model.n} Gaussians")
+        f"{h.backward_seconds / max(h.seconds, 1e-9):.0%}), {tr.state.model.n} Gaussians, "
+        f"far bound {tr.state.depth_far:.3g}")
     heldout = score_holdout(tr, scene, held, kept, k) if held.size else None
     if heldout is not None:
         write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")

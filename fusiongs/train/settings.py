@@ -29,7 +29,11 @@ class InitSettings:
     method: Literal["auto", "random", "stereo"] = "auto"
     n_points: int = 15000            # initial Gaussians (stereo points plus random ones in the frusta)
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
-    depth_max: float = 12.0          # far bound of the sampled depths (scene units)
+    depth_max: float = 12.0          # far bound of the sampled depths (scene units); with
+                                     # far_from_stereo, the least far bound
+    far_from_stereo: bool = True     # stereo init: sweep out to 1000 depth_min and raise the far
+                                     # bound (random points, scene extent) to 1.25x the 90th
+                                     # percentile of the stereo points' distances (deep scenes)
     depth_sampling: Literal["volume", "depth", "disparity"] = "depth"  # density of sampled depths
     opacity: float = 0.2             # initial opacity
     sh_degree: int = 0               # spherical-harmonics degree of the colours (0-3)

@@ -24,11 +24,13 @@ class FusionState(nn.Module):
         trajectory: camera-to-world poses in time, with learnable knot corrections.
         threshold: contrast thresholds θ = exp(s) per polarity (and per colour channel).
         log_gain: ``[F]`` log exposure gains g_i (zeros; learnable when configured).
+        depth_far: far bound of the initialisation (scene units; sizes the scene extent).
     """
 
     def __init__(self, model: GaussianModel, trajectory: Trajectory, threshold: ContrastThreshold,
-                 n_frames: int, learn_gain: bool):
+                 n_frames: int, learn_gain: bool, depth_far: float = 12.0):
         super().__init__()
+        self.depth_far = float(depth_far)
         self.model = model
         self.trajectory = trajectory
         self.threshold = threshold
@@ -62,8 +64,11 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
     return 1.1 * (radius + depth_max)
 
 
+STEREO_FAR_FACTOR = 1000.0  # the far-bound sweep of init.far_from_stereo reaches this x depth_min
+
+
 def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen: torch.Generator,
-                      images: torch.Tensor | None = None) -> GaussianModel:
+                      images: torch.Tensor | None = None) -> tuple[GaussianModel, float]:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
 
     Points are drawn on ``gen``'s device and returned on ``c2w``'s (the trainer's ``gen`` is on
@@ -74,12 +79,22 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
     ``stereo_share · n_points`` of the confident surface points, drawn uniformly, coloured by their
     pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
+    With ``init.far_from_stereo`` a first sweep reaches ``STEREO_FAR_FACTOR · depth_min`` (planes
+    are uniform in inverse depth, so this costs little resolution near the camera) and the far
+    bound becomes :func:`fusiongs.camera.stereo.far_bound` of its points, at least ``depth_max``.
+    When the bound moved, that sweep's points up to it are kept and the random ones fill the
+    frusta out to it; when it did not, the points come from a second sweep of
+    ``[depth_min, depth_max]`` (finer planes; the same Gaussians as without the option).
+
+    Returns:
+        ``(model, far)``: the Gaussians and the far bound used (scene units; ``depth_max`` unless
+        raised by the stereo points), which also sizes the scene extent (:func:`scene_extent`).
 
     Raises:
         ConfigError: ``stereo`` without at least two images, or with ``init.depth_min <= 0``.
     """
     from fusiongs.camera.frusta import sample_in_frusta
-    from fusiongs.camera.stereo import stereo_points
+    from fusiongs.camera.stereo import far_bound, stereo_points
     from fusiongs.errors import ConfigError
 
     ini = cfg.init
@@ -87,26 +102,43 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     if ini.method == "random" or (ini.method == "auto" and n_images < 2):
         return GaussianModel.random_in_frusta(data.camera, c2w, ini.n_points, ini.depth_min,
                                               ini.depth_max, generator=gen, sh_degree=ini.sh_degree,
-                                              init_opacity=ini.opacity, depth_sampling=ini.depth_sampling)
+                                              init_opacity=ini.opacity,
+                                              depth_sampling=ini.depth_sampling), ini.depth_max
     if n_images < 2:
         raise ConfigError("config", "init.method", "'random' for a scene with fewer than 2 frames "
                           "(stereo initialisation matches frames)", repr(ini.method))
     if ini.depth_min <= 0:
         raise ConfigError("config", "init.depth_min", "a depth > 0 for the stereo initialisation "
                           "(its planes are uniform in 1/depth)", repr(ini.depth_min))
-    xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, ini.depth_max,
-                                n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
+    def sweep(far: float) -> tuple[torch.Tensor, torch.Tensor]:
+        xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, far,
+                                    n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
+        return xyz, rgb
+
+    far = ini.depth_max
+    if ini.far_from_stereo:
+        wide = max(STEREO_FAR_FACTOR * ini.depth_min, ini.depth_max)
+        xyz, rgb = sweep(wide)
+        centres = c2w[:, :3, 3].detach().cpu()
+        far = far_bound(xyz, centres, ini.depth_max, wide)
+        if far > ini.depth_max:  # a deep scene: the wide sweep's points, up to the far bound
+            near_enough = torch.cdist(xyz.double(), centres.double()).amin(1) <= far
+            xyz, rgb = xyz[near_enough], rgb[near_enough]
+        else:  # within depth_max: the finer sweep of [depth_min, depth_max], as without the option
+            xyz, rgb = sweep(far)
+    else:
+        xyz, rgb = sweep(far)
     n_stereo = min(xyz.shape[0], round(ini.stereo_share * ini.n_points))
     pick = torch.randperm(xyz.shape[0], generator=gen, device=gen.device)[:n_stereo].to(xyz.device)
     rgb = rgb[pick].clamp(0.0, 1.0)
     if rgb.shape[1] == 1:
         rgb = rgb.expand(-1, 3)
     rand = sample_in_frusta(data.camera, c2w.cpu(), ini.n_points - n_stereo, ini.depth_min,
-                            ini.depth_max, gen, ini.depth_sampling).float()
+                            far, gen, ini.depth_sampling).float()
     xyz = torch.cat([xyz[pick], rand]).to(c2w.device)
     rgb = torch.cat([rgb, torch.full_like(rand, 0.5)]).to(c2w.device)
     return GaussianModel.from_points(xyz, rgb, ini.sh_degree, init_opacity=ini.opacity,
-                                     where="stereo init")
+                                     where="stereo init"), far
 
 
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
@@ -129,7 +161,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         t_init = torch.linspace(data.t_range[0], data.t_range[1], 16, dtype=torch.float64, device=device)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
-    model = initial_gaussians(data, c2w, cfg, gen, init_images)
+    model, far = initial_gaussians(data, c2w, cfg, gen, init_images)
     channels = 3 if data.cfa_index is not None else 1
     init = np.asarray(theta_init, dtype=np.float64)
     if init.ndim == 2 and init.shape[1] != channels:  # per-channel values for a per-channel model only
@@ -139,4 +171,5 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
     threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,
                                   image_size=(data.camera.height, data.camera.width),
                                   time_knots=th.time_knots, time_range=data.t_range)
-    return FusionState(model, trajectory, threshold, data.n_frames, cfg.blur.learn_gain).to(device)
+    return FusionState(model, trajectory, threshold, data.n_frames, cfg.blur.learn_gain,
+                       depth_far=far).to(device)

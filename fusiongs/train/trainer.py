@@ -188,7 +188,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     trajectory = build_trajectory(scene, cfg, device)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg))
-    extent = scene_extent(scene.poses.c2w, cfg.init.depth_max)
+    extent = scene_extent(scene.poses.c2w, state.depth_far)
     start, history = 0, History()
     # the frame order is the first draw of `gen`, made before a checkpoint replaces its state: a
     # resumed run visits the frames in the same order

@@ -9,6 +9,7 @@ import torch
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.camera.stereo import (
     depth_from_cost,
+    far_bound,
     inverse_depth_planes,
     neighbour_indices,
     plane_sweep_cost,
@@ -21,17 +22,22 @@ from fusiongs.sim.presets import get_preset
 from fusiongs.sim.raycast import RayCaster, fov_focal
 
 
-@pytest.fixture(scope="module")
-def views():
-    """Sharp ray-cast views of the ``boxes`` world along its simulated motion, with true depth."""
-    preset = get_preset("boxes")
-    w, h = 64, 48
+def _preset_views(name: str, w: int = 64, h: int = 48, n: int = 7):
+    """``n`` sharp ray-cast views of a preset's world along its simulated motion."""
+    preset = get_preset(name)
     f = fov_focal(w, preset.hfov_deg)
     cam = PinholeCamera(w, h, f, f, w / 2, h / 2)
     traj = make_trajectory(preset.motion, 1.0, np.random.default_rng(0))
-    c2w = traj.c2w(np.linspace(0.0, 1.0, 7))
+    c2w = traj.c2w(np.linspace(0.0, 1.0, n))
     caster = RayCaster(preset.world, cam, 1, 0)
-    images = torch.stack([caster.render(m) for m in c2w])
+    return cam, c2w, caster, torch.stack([caster.render(m) for m in c2w])
+
+
+@pytest.fixture(scope="module")
+def views():
+    """Sharp ray-cast views of the ``boxes`` world along its simulated motion, with true depth."""
+    cam, c2w, caster, images = _preset_views("boxes")
+    w, h = cam.width, cam.height
     depth = []
     for m in c2w:
         pts = caster.surface_points(m).double()
@@ -160,7 +166,7 @@ def test_stereo_init_of_the_trainer(views):
 
     cfg = DeblurConfig(init=InitSettings(method="stereo", n_points=1000, stereo_share=0.75,
                                          stereo_planes=16))
-    model = initial_gaussians(Data, c2w.float(), cfg, torch.Generator().manual_seed(0), images)
+    model, far = initial_gaussians(Data, c2w.float(), cfg, torch.Generator().manual_seed(0), images)
     assert model.n == 1000
     colours = model.base_colors()
     grey = (colours - 0.5).abs().amax(1) < 1e-6
@@ -186,7 +192,7 @@ def test_auto_init_is_stereo_with_two_frames_and_random_otherwise(views):
     def grey_share(method, n_images):
         cfg = DeblurConfig(init=InitSettings(method=method, n_points=400, stereo_planes=8))
         imgs = images[:n_images] if n_images else None
-        m = initial_gaussians(Data, c2w[:max(n_images, 1)].float(), cfg,
+        m, _ = initial_gaussians(Data, c2w[:max(n_images, 1)].float(), cfg,
                               torch.Generator().manual_seed(0), imgs)
         return float(((m.base_colors() - 0.5).abs().amax(1) < 1e-6).float().mean())
 
@@ -194,3 +200,45 @@ def test_auto_init_is_stereo_with_two_frames_and_random_otherwise(views):
     assert grey_share("auto", 1) == 1.0      # one frame: random grey points
     assert grey_share("auto", 0) == 1.0      # no frames (event-only)
     assert grey_share("random", 3) == 1.0
+
+
+def test_far_bound_is_a_margin_over_a_high_quantile_of_the_distances():
+    centres = torch.zeros(2, 3)
+    xyz = torch.zeros(1000, 3)
+    xyz[:, 2] = torch.arange(1, 1001, dtype=torch.float32) / 10  # distances 0.1 .. 100
+    assert far_bound(xyz, centres, 1.0, 1e4) == pytest.approx(1.25 * 90.0, rel=1e-3)
+    assert far_bound(xyz, centres, 1.0, 50.0) == 50.0                 # at most `most`
+    assert far_bound(xyz, centres, 200.0, 1e4) == 200.0               # at least `least`
+    assert far_bound(torch.zeros(0, 3), centres, 12.0, 1e4) == 12.0   # no points: `least`
+    xyz[-50:, 2] = 1e6  # a few matches at the end of the sweep do not move it
+    assert far_bound(xyz, centres, 1.0, 1e7) == pytest.approx(1.25 * 90.0, rel=1e-3)
+
+
+def test_the_far_bound_reaches_a_far_wall_from_the_stereo_points():
+    """The ``depth`` world has a wall at 40 m behind near posts: with ``far_from_stereo`` the far
+    bound (random points, scene extent) covers the wall; the configured 12 m does not, and a
+    shallow world (``boxes``, within 12 m of the camera) keeps the configured bound."""
+    from fusiongs.train.settings import DeblurConfig, InitSettings
+    from fusiongs.train.state import initial_gaussians
+
+    def init(name, far_from_stereo):
+        cam, c2w, _, images = _preset_views(name)
+
+        class Data:
+            camera = cam
+
+        cfg = DeblurConfig(init=InitSettings(method="stereo", n_points=1000,
+                                             far_from_stereo=far_from_stereo))
+        model, far = initial_gaussians(Data, torch.as_tensor(c2w).float(), cfg,
+                                       torch.Generator().manual_seed(0), images)
+        centres = torch.as_tensor(c2w)[:, :3, 3].float()
+        return far, torch.cdist(model.means.detach(), centres).amin(1), model.means.detach()
+
+    far, dist, _ = init("depth", True)
+    assert 40.0 <= far <= 100.0
+    assert float(dist.max()) < far * 1.5 and float((dist > 30).float().mean()) > 0.2
+    far, dist, _ = init("depth", False)
+    assert far == 12.0 and float(dist.max()) < 12.0 * 1.5  # frusta corners reach sqrt(3) x depth
+    far, _, means = init("boxes", True)
+    assert far == 12.0  # and then the same Gaussians as without the option
+    assert torch.equal(means, init("boxes", False)[2])
