@@ -16,10 +16,11 @@ events per pixel, so the quantisation of the counts matters less.
 This is a regression on event counts that are themselves noisy: per-pixel threshold spread and
 background activity attenuate a least-squares or L1 fit toward zero (measured on tuning scenes:
 down to -40 %), and fitting in count units instead overshoots. The fit therefore uses instrumental
-variables (:func:`iv_thresholds`): the counts of the pixel's same-channel neighbours over the same
-pair see nearly the same log change but carry independent noise. Two indicator regressors absorb
-the part of a threshold that a pixel's reference level had already covered at the first frame. A
-coarse L1 grid search gives the starting point and the outlier trimming.
+variables (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`): the counts of the pixel's
+same-channel neighbours over the same pair see nearly the same log change but carry independent
+noise. Two indicator regressors absorb the part of a threshold that a pixel's reference level had
+already covered at the first frame. A coarse L1 grid search gives the starting point and the
+outlier trimming.
 
 Why two unknowns: with ``theta_+ != theta_-`` texture that moves back and forth makes the net
 count ``N_+ - N_-`` drift while the log intensity returns to its start; one symmetric threshold can
@@ -44,9 +45,10 @@ import numpy as np
 import torch
 
 from fusiongs.errors import InputError
+from fusiongs.eval.calibrate_fit import PairData, search_both
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
-from fusiongs.events.stats import fast_event_mask
+from fusiongs.events.stats import dead_time_us, fast_in_spans, spatial_hot_pixels
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
 from fusiongs.frames.frameset import FrameSet
@@ -79,16 +81,17 @@ class CalibrateOptions:
         refractory_keep: the neighbour gate is used for a channel only when it keeps at least this
             fraction of the pairs the pixel's own gate keeps (else the pixel's own gate alone).
         dead_time_jump: jump factor of the interval histogram that marks the dead time
-            (:func:`dead_time_us`).
+            (:func:`fusiongs.events.stats.dead_time_us`).
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision
             (:func:`shrink_channels`; 0 keeps every channel on its own).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
-        iv_offsets: fit the two indicator offsets in the IV model (:func:`_iv_pixel_sums`).
+        iv_offsets: fit the two indicator offsets in the IV model
+            (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`).
         trim: residuals farther than this many robust standard deviations from their pair's
             median at the starting fit are left out of the IV fit.
         units: residuals in ``"log"`` units, in ``"count"`` units (events), or ``"both"``: the
-            geometric mean of the two estimates (:func:`search_both`).
+            geometric mean of the two estimates (:func:`fusiongs.eval.calibrate_fit.search_both`).
         tile: side in pixels of the bootstrap tiles.
         bootstrap: bootstrap resamples for the uncertainty.
         unknown_scale: geometric mean ``sqrt(theta_+ theta_-)`` assumed when there are no frames.
@@ -148,350 +151,10 @@ def pixel_channels(events: EventStream) -> np.ndarray:
     return cfa_channel_index(events.cfa, events.height, events.width).astype(np.int64).reshape(-1)
 
 
-def hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 20.0) -> np.ndarray:
-    """``[H*W]`` bool: pixels whose event count is a spatial outlier among same-channel neighbours.
-
-    A pixel is hot when its count exceeds ``factor`` times the median of its eight same-channel
-    neighbours (distance 2 on a CFA, 1 on a grey sensor) plus ``floor``.
-    """
-    from scipy.ndimage import median_filter
-
-    counts = events.pixel_counts().astype(np.float64)
-    step = 1 if events.cfa is None else 2
-    foot = np.zeros((2 * step + 1, 2 * step + 1), bool)
-    foot[::step, ::step] = True
-    foot[step, step] = False
-    med = median_filter(counts, footprint=foot, mode="mirror")
-    return (counts > factor * med + floor).reshape(-1)
-
-
-def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -> float:
-    """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
-    between consecutive events of the same pixel.
-
-    A refractory period makes the interval histogram (log-spaced bins) jump at the dead time:
-    below it only noise and hot-pixel events meet a pixel's previous event, above it every fast
-    edge does. The estimate is the left edge of the first bin ``k`` holding ``jump`` times more
-    intervals than the largest of the three bins before it, where bins ``k`` and ``k + 1`` together
-    hold at least 0.5 % of all intervals (a dead time inside bin ``k`` splits the step over both)
-    and bin ``k + 2`` holds at most ``plateau`` times the larger of them (a step, not a rise); 0
-    when the histogram has no such step. Background activity that ignores the dead time fills the
-    bins below it (measured on tuning scenes: a 3-5 Hz sensor's step is 10-15x, not 20x), while
-    the smooth rise of a real DAVIS346's intervals (pixel bandwidth: none under 100 µs, then 2-6x
-    more per bin from 1 ms on for several bins) is no step.
-    """
-    if len(events) < 2:
-        return 0.0
-    pix = events.y.astype(np.int64) * events.width + events.x
-    order = np.argsort(pix, kind="stable")
-    ps, ts = pix[order], events.t[order]
-    dt = (ts[1:] - ts[:-1])[ps[1:] == ps[:-1]]
-    if dt.size < 100:
-        return 0.0
-    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
-    h = np.histogram(dt, edges)[0].astype(np.float64)
-    h = np.concatenate([h, np.zeros(2)])
-    for k in range(1, len(h) - 2):
-        before = h[max(0, k - 3):k].max()
-        step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
-        if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * dt.size
-                and h[k + 2] <= plateau * step):
-            return float(edges[k])
-    return 0.0
-
-
-def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) -> np.ndarray:
-    """``[len(edges) - 1, H*W]`` int32 number of events closer than ``gap_us`` to the previous event
-    of the same pixel (:func:`~fusiongs.events.stats.fast_event_mask`), per time segment
-    ``[edges[j], edges[j+1])``."""
-    hw = events.height * events.width
-    out = np.zeros((len(edges_us) - 1, hw), np.int32)
-    fast = fast_event_mask(events, gap_us)
-    if not fast.any():
-        return out
-    pix = (events.y.astype(np.int64) * events.width + events.x)[fast]
-    seg = np.searchsorted(edges_us, events.t[fast], side="right") - 1
-    ok = (seg >= 0) & (seg < len(edges_us) - 1)
-    np.add.at(out, (seg[ok], pix[ok]), 1)
-    return out
-
-
-# ---------------------------------------------------------------------------- the objective
-@dataclass(frozen=True, eq=False)
-class PairData:
-    """Everything the consistency objective needs for one channel's selected pixels.
-
-    Attributes:
-        log_s: ``[F, P]`` log sensor intensity of the frames.
-        n: ``[F, M, 2, P]`` ON/OFF counts from each mid-exposure to each sample instant.
-        pairs: ``[Q, 2]`` int64 frame indices ``(i, j)``, ``i < j``, of the compared frames.
-        dn: ``[Q, 2, P]`` ON/OFF counts between the two mid-exposures of every pair.
-        valid: ``[Q, P]`` bool, pixel usable in the pair.
-        tile: ``[P]`` int64 bootstrap tile of every pixel.
-        n_tiles: number of tiles.
-        z: ``[Q, 2, P]`` instruments: the median ON/OFF counts of the pixel's four same-channel
-            neighbours over the same pair (:func:`iv_thresholds`).
-    """
-
-    log_s: torch.Tensor
-    n: torch.Tensor
-    pairs: torch.Tensor
-    dn: torch.Tensor
-    valid: torch.Tensor
-    tile: torch.Tensor
-    n_tiles: int
-    z: torch.Tensor
-
-    def subset(self, idx: torch.Tensor) -> PairData:
-        return PairData(self.log_s[:, idx], self.n[..., idx], self.pairs, self.dn[..., idx],
-                        self.valid[:, idx], self.tile[idx], self.n_tiles,
-                        self.z[..., idx])
-
-
-def tile_losses(data: PairData, theta_pos: torch.Tensor, theta_neg: torch.Tensor,
-                count_units: bool = True) -> tuple[torch.Tensor, torch.Tensor]:
-    """Sum of absolute consistency residuals per candidate and tile.
-
-    Args:
-        data: one channel's :class:`PairData`.
-        theta_pos, theta_neg: ``[G]`` candidate thresholds.
-
-    Returns:
-        ``([G, n_tiles] float64 summed |r - b|, [n_tiles] float64 residual count)``.
-    """
-    tp = theta_pos.to(torch.float32).reshape(-1, 1, 1, 1)
-    tn = theta_neg.to(torch.float32).reshape(-1, 1, 1, 1)
-    m = data.n.shape[1]
-    e = tp * data.n[None, :, :, 0] - tn * data.n[None, :, :, 1]  # [G, F, M, P]
-    log_r = torch.logsumexp(e, dim=2) - float(np.log(m))  # [G, F, P]
-    log_l = data.log_s[None] - log_r
-    step = tp[:, :, 0] * data.dn[None, :, 0] - tn[:, :, 0] * data.dn[None, :, 1]  # [G, Q, P]
-    r = log_l[:, data.pairs[:, 1]] - log_l[:, data.pairs[:, 0]] - step
-    valid = data.valid[None].expand_as(r)
-    med = torch.where(valid, r, torch.full_like(r, float("nan"))).nanmedian(dim=2, keepdim=True).values
-    scale = torch.sqrt(tp * tn)[:, :, 0] if count_units else 1.0  # [G, 1, 1]: residuals in events
-    a = torch.where(valid, (r - torch.nan_to_num(med)).abs() / scale,
-                    torch.zeros_like(r)).sum(dim=1)
-    g = a.shape[0]
-    out = torch.zeros(g, data.n_tiles, dtype=torch.float64)
-    out.index_add_(1, data.tile, a.to(torch.float64))
-    cnt = torch.zeros(data.n_tiles, dtype=torch.float64)
-    cnt.index_add_(0, data.tile, data.valid.sum(0).to(torch.float64))
-    return out, cnt
-
-
-def _grid_losses(data: PairData, tp: np.ndarray, tn: np.ndarray, count_units: bool = True,
-                 chunk: int = 16) -> tuple[np.ndarray, np.ndarray]:
-    """``tile_losses`` over a candidate list in chunks: ``([G, T], [T])`` numpy."""
-    outs, cnt = [], None
-    for i in range(0, len(tp), chunk):
-        o, cnt = tile_losses(data, torch.as_tensor(tp[i:i + chunk]), torch.as_tensor(tn[i:i + chunk]),
-                             count_units)
-        outs.append(o.numpy())
-    return np.concatenate(outs), cnt.numpy()
-
-
-def _grid(centre: tuple[float, float], step: float, half: int) -> tuple[np.ndarray, np.ndarray]:
-    """A ``(2 half + 1)^2`` grid in log-threshold space around ``centre`` with log ``step``."""
-    k = np.arange(-half, half + 1) * step
-    lp, ln = np.meshgrid(np.log(centre[0]) + k, np.log(centre[1]) + k, indexing="ij")
-    return np.exp(lp.reshape(-1)), np.exp(ln.reshape(-1))
-
-
-def search_both(data: PairData, opts: CalibrateOptions, rng: np.random.Generator) -> dict:
-    """The estimate of :attr:`CalibrateOptions.units`: one search, or the geometric mean of the
-    log-unit and the count-unit searches (``"both"``).
-
-    A residual measured in log units is the forward regression of the frames' log change on the
-    event counts: noise in the counts (threshold spread, background activity, quantisation)
-    attenuates it, so it comes out low. Measured in events (divided by ``sqrt(theta_+ theta_-)``)
-    it is the reverse regression, which the same noise biases high. Their geometric mean cancels
-    the first-order bias when both directions are about equally noisy (the geometric-mean or
-    reduced-major-axis regression; Ricker, J. Fish. Res. Board Can. 1973).
-    """
-    if opts.units == "iv":
-        start = search_thresholds(data, opts, rng, count_units=False, refine=False)
-        res = iv_thresholds(data, (start["theta_pos"], start["theta_neg"]), opts, rng)
-        res.update({"pixels": start["pixels"], "residuals": start["residuals"],
-                    "log_units": {k: start[k] for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")},
-                    "count_units": None})
-        return res
-    runs = {}
-    for name in (("log_units", "count_units") if opts.units == "both" else (f"{opts.units}_units",)):
-        runs[name] = search_thresholds(data, opts, rng, count_units=name == "count_units")
-    vals = list(runs.values())
-    out = {"pixels": vals[0]["pixels"], "residuals": vals[0]["residuals"]}
-    for name in ("log_units", "count_units"):
-        out[name] = ({k: runs[name][k] for k in ("theta_pos", "theta_neg", "std_pos", "std_neg", "loss")}
-                     if name in runs else None)
-    for k in ("theta_pos", "theta_neg"):
-        out[k] = float(np.exp(np.mean([np.log(v[k]) for v in vals])))
-        out[k.replace("theta", "std")] = float(np.sqrt(np.mean([v[k.replace("theta", "std")] ** 2
-                                                                for v in vals]) / len(vals)))
-    return out
-
-
-def search_thresholds(data: PairData, opts: CalibrateOptions, rng: np.random.Generator,
-                      count_units: bool = True, refine: bool = True) -> dict:
-    """Coarse-to-fine grid search of ``(theta_+, theta_-)`` for one channel, plus the bootstrap
-    (``refine=False``: the coarse grid's best only, no bootstrap).
-
-    Returns:
-        ``{"theta_pos", "theta_neg", "std_pos", "std_neg", "loss", "pixels", "residuals"}``.
-    """
-    p = data.log_s.shape[1]
-    lo, hi = opts.theta_range
-    coarse = data if p <= opts.coarse_pixels else data.subset(
-        torch.as_tensor(np.sort(rng.choice(p, opts.coarse_pixels, replace=False))))
-    vals = np.geomspace(lo, hi, opts.coarse_steps)
-    step = float(np.log(vals[1] / vals[0]))
-    tp, tn = (a.reshape(-1) for a in np.meshgrid(vals, vals, indexing="ij"))
-    loss, cnt = _grid_losses(coarse, tp, tn, count_units)
-    tot = loss.sum(1) / max(cnt.sum(), 1.0)
-    best = (float(tp[np.argmin(tot)]), float(tn[np.argmin(tot)]))
-    if not refine:
-        return {"theta_pos": best[0], "theta_neg": best[1], "std_pos": float("nan"),
-                "std_neg": float("nan"), "loss": float(tot.min()), "pixels": int(p),
-                "residuals": int(cnt.sum())}
-    for _ in range(opts.refine_levels):
-        step /= 3.0
-        tp, tn = _grid(best, step, 2)
-        loss, cnt = _grid_losses(data, tp, tn, count_units)
-        tot = loss.sum(1) / max(cnt.sum(), 1.0)
-        best = (float(tp[np.argmin(tot)]), float(tn[np.argmin(tot)]))
-    # Bootstrap over tiles on a final grid around the best (step 1.5 %).
-    tp, tn = _grid(best, 0.015, 3)
-    loss, cnt = _grid_losses(data, tp, tn, count_units)
-    used = cnt > 0
-    loss, cnt = loss[:, used], cnt[used]
-    tot = loss.sum(1) / max(cnt.sum(), 1.0)
-    i_best = int(np.argmin(tot))
-    std_p = std_n = float("nan")
-    if opts.bootstrap > 0 and cnt.size >= 4:
-        w = rng.multinomial(cnt.size, np.full(cnt.size, 1.0 / cnt.size), size=opts.bootstrap)
-        w = w.astype(np.float64)
-        pick = np.argmin((w @ loss.T) / np.maximum(w @ cnt, 1.0)[:, None], axis=1)
-        std_p, std_n = float(np.std(tp[pick])), float(np.std(tn[pick]))
-    return {"theta_pos": float(tp[i_best]), "theta_neg": float(tn[i_best]), "std_pos": std_p,
-            "std_neg": std_n, "loss": float(tot[i_best]), "pixels": int(p), "residuals": int(cnt.sum())}
-
-
-def log_sharp(data: PairData, theta_pos: float, theta_neg: float) -> torch.Tensor:
-    """``[F, P]`` log EDI intensity ``log S - log R(theta)`` of the selected pixels."""
-    e = theta_pos * data.n[:, :, 0] - theta_neg * data.n[:, :, 1]  # [F, M, P]
-    return data.log_s - (torch.logsumexp(e, dim=1) - float(np.log(data.n.shape[1])))
-
-
-def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
-                   ) -> torch.Tensor:
-    """Per-pixel sums of the instrumental-variable normal equations ``[P, K, K + 1]``.
-
-    Regressors (``K`` = 4, or 2 without ``offsets``): ``N_+``, ``-N_-``, and the indicators
-    ``[N_+ > 0]``, ``-[N_- > 0]`` whose coefficients absorb the part of a threshold a pixel's
-    reference level had already covered (or still lacked) at the first frame; instruments: the
-    same functions of the neighbours' counts. Columns ``[sum z_k x_l for l] + [sum z_k y]``, all
-    centred per pair over ``keep`` (the per-pair offset ``b``).
-    """
-    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]  # [Q, P]
-    w = keep.to(y.dtype)
-    cnt = w.sum(1, keepdim=True).clamp_min(1.0)
-
-    def centred(v):  # subtract the pair's mean over the kept pixels (the per-pair offset b)
-        return (v - (v * w).sum(-1, keepdim=True) / cnt) * w
-
-    xs = [data.dn[:, 0], -data.dn[:, 1]]
-    zs = [data.z[:, 0], -data.z[:, 1]]
-    if offsets:
-        xs += [(data.dn[:, 0] > 0).to(y.dtype), -(data.dn[:, 1] > 0).to(y.dtype)]
-        zs += [(data.z[:, 0] > 0.5).to(y.dtype), -(data.z[:, 1] > 0.5).to(y.dtype)]
-    xs = [centred(v) for v in xs]
-    zs = [centred(v) for v in zs]
-    yc = centred(y)
-    rows = [torch.stack([(z * x).sum(0) for x in xs] + [(z * yc).sum(0)], -1) for z in zs]  # [P, K+1]
-    return torch.stack(rows, 1).to(torch.float64)
-
-
-def _iv_sums(data: PairData, per_pix: torch.Tensor) -> torch.Tensor:
-    """Per-tile sums ``[T, K, K + 1]`` of :func:`_iv_pixel_sums` (the bootstrap resamples tiles)."""
-    out = torch.zeros(data.n_tiles, *per_pix.shape[1:], dtype=torch.float64)
-    out.index_add_(0, data.tile, per_pix)
-    return out
-
-
-def _solve_iv(sums: torch.Tensor) -> tuple[float, float]:
-    sol = torch.linalg.solve(sums[..., :-1], sums[..., -1])
-    return float(sol[..., 0]), float(sol[..., 1])
-
-
-def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOptions,
-                  rng: np.random.Generator, iters: int = 4) -> dict:
-    """Instrumental-variable estimate of ``(theta_+, theta_-)`` for one channel.
-
-    ``log L_j - log L_i = theta_+ N_+ - theta_- N_- + b`` is a regression on event counts that
-    carry noise of their own (per-pixel threshold spread, background activity): the plain fit is
-    attenuated toward zero. The counts of the pixel's same-channel neighbours over the same pair
-    see nearly the same log change but have independent noise, so they are instruments (Wald
-    1940; Durbin 1954): the moment conditions ``E[z_k r] = 0`` (``k`` = ON, OFF) are unbiased
-    under such noise, and are also unbiased under the count quantisation, whose error is in the
-    log change, not the counts. The EDI term makes ``y`` depend on theta, so the 2x2 linear
-    system is re-solved a few times. Residuals beyond ``trim`` median absolute deviations of the
-    starting fit are left out (moving occlusions, saturation the gate missed). The uncertainty is
-    a tile bootstrap of the normal equations.
-    """
-    tp, tn = start
-    # Trimmed once, at the starting fit: re-trimming at each new estimate selects on the residual
-    # the estimate is made from (measured on tuning scenes: errors up to 29 % instead of 17 %).
-    keep = _inliers(data, log_sharp(data, tp, tn), tp, tn, opts.trim)
-    sums = None
-    for _ in range(iters):
-        sums = _iv_sums(data, _iv_pixel_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets))
-        new = _solve_iv(sums.sum(0))
-        if not (np.isfinite(new[0]) and np.isfinite(new[1]) and new[0] > 0 and new[1] > 0):
-            return {"theta_pos": start[0], "theta_neg": start[1], "std_pos": float("nan"),
-                    "std_neg": float("nan"), "iv": "failed (no positive solution)"}
-        tp, tn = new
-    std_p = std_n = float("nan")
-    t = sums.shape[0]
-    if opts.bootstrap > 0 and t >= 4:
-        w = torch.as_tensor(rng.multinomial(t, np.full(t, 1.0 / t), size=opts.bootstrap), dtype=torch.float64)
-        boot = torch.einsum("bt,tij->bij", w, sums)
-        sol = torch.linalg.solve(boot[..., :-1], boot[..., -1])[:, :2]
-        ok = torch.isfinite(sol).all(1) & (sol > 0).all(1)
-        std_p, std_n = (float(v) for v in sol[ok].std(0)) if ok.sum() > 2 else (std_p, std_n)
-    return {"theta_pos": tp, "theta_neg": tn, "std_pos": std_p, "std_neg": std_n,
-            "kept": int(keep.sum()), "agreement": agreement(data, tp, tn, keep)}
-
-
-def _inliers(data: PairData, log_l: torch.Tensor, tp: float, tn: float, trim: float) -> torch.Tensor:
-    """``[Q, P]`` valid pixel pairs whose residual at ``(tp, tn)`` lies within ``trim`` robust standard
-    deviations (1.4826 MAD) of its pair's median."""
-    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]
-    r = y - tp * data.dn[:, 0] + tn * data.dn[:, 1]
-    nan = torch.full_like(r, float("nan"))
-    med = torch.where(data.valid, r, nan).nanmedian(dim=1, keepdim=True).values
-    dev = (r - med).abs()
-    mad = torch.where(data.valid, dev, nan).nanmedian()
-    return data.valid & (dev <= trim * 1.4826 * mad)
-
-
-def agreement(data: PairData, theta_pos: float, theta_neg: float, keep: torch.Tensor) -> float:
-    """How well events explain the frames: the correlation, over kept pixel pairs (centred per
-    pair), between the EDI log change and ``theta_+ N_+ - theta_- N_-``. Near 1 when events and
-    frames agree; low for sensors whose events carry little (heavy noise, large thresholds)."""
-    log_l = log_sharp(data, theta_pos, theta_neg)
-    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]
-    x = theta_pos * data.dn[:, 0] - theta_neg * data.dn[:, 1]
-    w = keep.to(y.dtype)
-    cnt = w.sum(1, keepdim=True).clamp_min(1.0)
-    yc = (y - (y * w).sum(1, keepdim=True) / cnt) * w
-    xc = (x - (x * w).sum(1, keepdim=True) / cnt) * w
-    den = float(torch.sqrt((yc * yc).sum() * (xc * xc).sum()))
-    return float((yc * xc).sum()) / den if den > 0 else 0.0
-
-
 def neighbour_counts(between: np.ndarray, height: int, width: int, step: int) -> np.ndarray:
     """``[F-1, 2, H*W]`` median of the four same-channel neighbours' counts (``step`` pixels away:
-    1 on a grey sensor, 2 on a CFA), edges replicated: the instruments of :func:`iv_thresholds`."""
+    1 on a grey sensor, 2 on a CFA), edges replicated: the instruments of
+    :func:`~fusiongs.eval.calibrate_fit.iv_thresholds`."""
     q = between.shape[0]
     m = between.reshape(q, 2, height, width).astype(np.float32)
     pad = np.pad(m, ((0, 0), (0, 0), (step, step), (step, step)), mode="edge")
@@ -580,7 +243,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     opts = opts or CalibrateOptions()
     _check_inputs(frames, events)
     rng = np.random.default_rng(opts.seed)
-    hot = hot_pixels(events, opts.hot_factor, opts.hot_floor)
+    hot = spatial_hot_pixels(events, opts.hot_factor, opts.hot_floor)
     chan = pixel_channels(events)
     names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS
     ratio = _balance_ratio(events, chan, hot, len(names), opts, rng)
@@ -600,7 +263,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     dead = dead_time_us(events, opts.dead_time_jump)
     gap = opts.refractory_gate * dead
     spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
-    bad_pair = _fast_in_spans(events, gap, spans)
+    bad_pair = fast_in_spans(events, gap, spans)
     bad_near = bad_pair
     if opts.refractory_radius > 0 and gap > 0:
         from scipy.ndimage import maximum_filter
@@ -671,19 +334,6 @@ def shrink_channels(theta: np.ndarray, std: np.ndarray, prior: float) -> tuple[n
     post_w = w + 1.0 / prior**2
     out = np.exp((w * lt + common / prior**2) / post_w)
     return out, out / np.sqrt(post_w)
-
-
-def _fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.ndarray:
-    """``[S, H*W]`` bool: pixel has two events closer than ``gap_us`` inside span ``[a, b)``."""
-    hw = events.height * events.width
-    if gap_us <= 0 or len(spans) == 0:
-        return np.zeros((len(spans), hw), bool)
-    bounds = np.unique(spans.reshape(-1))
-    seg = fast_event_counts(events, gap_us, bounds)  # [len(bounds) - 1, HW]
-    cum = np.concatenate([np.zeros((1, hw), np.int64), np.cumsum(seg, axis=0)])
-    a = np.searchsorted(bounds, spans[:, 0])
-    b = np.searchsorted(bounds, spans[:, 1])
-    return (cum[b] - cum[a]) > 0
 
 
 def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch: int,

@@ -1,4 +1,5 @@
-"""Summary statistics and sanity warnings of an event stream (used by ``fusiongs inspect``)."""
+"""Summary statistics and sanity warnings of an event stream (``fusiongs inspect``), and the
+sensor statistics of the threshold calibration: hot pixels, the dead time, fast events."""
 
 from __future__ import annotations
 
@@ -99,3 +100,84 @@ def stream_warnings(stream: EventStream, *, gap_factor: float = 10.0, gap_min_us
         out.append(f"{n.size} hot pixel(s) with more than {hot_factor:g}x the median active-pixel "
                    f"count ({med:g}): {listed}")
     return out
+
+
+def spatial_hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 20.0) -> np.ndarray:
+    """``[H*W]`` bool: pixels whose event count is a spatial outlier among same-channel neighbours.
+
+    A pixel is hot when its count exceeds ``factor`` times the median of its eight same-channel
+    neighbours (distance 2 on a CFA, 1 on a grey sensor) plus ``floor``.
+    """
+    from scipy.ndimage import median_filter
+
+    counts = events.pixel_counts().astype(np.float64)
+    step = 1 if events.cfa is None else 2
+    foot = np.zeros((2 * step + 1, 2 * step + 1), bool)
+    foot[::step, ::step] = True
+    foot[step, step] = False
+    med = median_filter(counts, footprint=foot, mode="mirror")
+    return (counts > factor * med + floor).reshape(-1)
+
+
+def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -> float:
+    """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
+    between consecutive events of the same pixel.
+
+    A refractory period makes the interval histogram (log-spaced bins) jump at the dead time:
+    below it only noise and hot-pixel events meet a pixel's previous event, above it every fast
+    edge does. The estimate is the left edge of the first bin ``k`` holding ``jump`` times more
+    intervals than the largest of the three bins before it, where bins ``k`` and ``k + 1`` together
+    hold at least 0.5 % of all intervals (a dead time inside bin ``k`` splits the step over both)
+    and bin ``k + 2`` holds at most ``plateau`` times the larger of them (a step, not a rise); 0
+    when the histogram has no such step. Background activity that ignores the dead time fills the
+    bins below it (measured on tuning scenes: a 3-5 Hz sensor's step is 10-15x, not 20x), while
+    the smooth rise of a real DAVIS346's intervals (pixel bandwidth: none under 100 µs, then 2-6x
+    more per bin from 1 ms on for several bins) is no step.
+    """
+    if len(events) < 2:
+        return 0.0
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")
+    ps, ts = pix[order], events.t[order]
+    dt = (ts[1:] - ts[:-1])[ps[1:] == ps[:-1]]
+    if dt.size < 100:
+        return 0.0
+    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
+    h = np.histogram(dt, edges)[0].astype(np.float64)
+    h = np.concatenate([h, np.zeros(2)])
+    for k in range(1, len(h) - 2):
+        before = h[max(0, k - 3):k].max()
+        step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
+        if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * dt.size
+                and h[k + 2] <= plateau * step):
+            return float(edges[k])
+    return 0.0
+
+
+def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) -> np.ndarray:
+    """``[len(edges) - 1, H*W]`` int32 number of events closer than ``gap_us`` to the previous event
+    of the same pixel (:func:`fast_event_mask`), per time segment
+    ``[edges[j], edges[j+1])``."""
+    hw = events.height * events.width
+    out = np.zeros((len(edges_us) - 1, hw), np.int32)
+    fast = fast_event_mask(events, gap_us)
+    if not fast.any():
+        return out
+    pix = (events.y.astype(np.int64) * events.width + events.x)[fast]
+    seg = np.searchsorted(edges_us, events.t[fast], side="right") - 1
+    ok = (seg >= 0) & (seg < len(edges_us) - 1)
+    np.add.at(out, (seg[ok], pix[ok]), 1)
+    return out
+
+
+def fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.ndarray:
+    """``[S, H*W]`` bool: pixel has two events closer than ``gap_us`` inside span ``[a, b)``."""
+    hw = events.height * events.width
+    if gap_us <= 0 or len(spans) == 0:
+        return np.zeros((len(spans), hw), bool)
+    bounds = np.unique(spans.reshape(-1))
+    seg = fast_event_counts(events, gap_us, bounds)  # [len(bounds) - 1, HW]
+    cum = np.concatenate([np.zeros((1, hw), np.int64), np.cumsum(seg, axis=0)])
+    a = np.searchsorted(bounds, spans[:, 0])
+    b = np.searchsorted(bounds, spans[:, 1])
+    return (cum[b] - cum[a]) > 0

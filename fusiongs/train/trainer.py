@@ -320,7 +320,7 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     """The fast events whose pixels' counts are lower bounds (``events.censor`` times the dead
     time; the calibration's estimate, else measured here); ``(None, None)`` when the stream shows
     no refractory floor."""
-    from fusiongs.eval.calibrate import dead_time_us
+    from fusiongs.events.stats import dead_time_us
     from fusiongs.train.data import fast_events
 
     dead = theta0.details.get("dead_time_us")  # a calibration.json may come from elsewhere

@@ -10,13 +10,9 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate import (
-    CalibrateOptions,
-    dead_time_us,
-    estimate_thresholds,
-    hot_pixels,
-    shrink_channels,
-)
+from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, shrink_channels
+from fusiongs.events.stats import dead_time_us
+from fusiongs.events.stats import spatial_hot_pixels as hot_pixels
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds, read_calibration, write_calibration
 from fusiongs.frames.frameset import FrameSet
