@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -33,34 +33,11 @@ from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
 from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data, pvc_readouts
+from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState, build_state, scene_extent
 from fusiongs.train.step import training_step
-
-FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
-
-
-@dataclass
-class History:
-    """Per-iteration curves kept for the report (one entry per iteration; read back from the
-    device every ``FLUSH_EVERY`` iterations and at checkpoints). ``step_seconds`` and the render /
-    backward times are host times: on a GPU they count kernel launches, not the device's work."""
-
-    iteration: list[int] = field(default_factory=list)
-    loss: list[float] = field(default_factory=list)
-    blur: list[float] = field(default_factory=list)
-    event: list[float] = field(default_factory=list)
-    edi: list[float] = field(default_factory=list)
-    theta_pos: list[list[float]] = field(default_factory=list)
-    theta_neg: list[list[float]] = field(default_factory=list)
-    n_gaussians: list[int] = field(default_factory=list)
-    event_weight: list[float] = field(default_factory=list)  # λ_ev (α in event-only mode)
-    psnr_input: list[float] = field(default_factory=list)    # running PSNR of re-rendered blurry frames
-    step_seconds: list[float] = field(default_factory=list)  # wall time of each iteration
-    seconds: float = 0.0
-    render_seconds: float = 0.0      # rasteriser forward passes
-    backward_seconds: float = 0.0    # backward through losses and rasteriser
 
 
 @dataclass
@@ -222,11 +199,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
                disable=not (cfg.output.progress and tty), desc="fusiongs", dynamic_ncols=True,
                file=sys.stderr)
-    pending: list[_Pending] = []
+    pending: list[PendingRow] = []
     t_begin, seconds_before = time.perf_counter(), history.seconds
 
     def save() -> None:
-        _flush(history, pending, bar)
+        flush_pending(history, pending, bar)
         history.seconds = seconds_before + time.perf_counter() - t_begin
         save_checkpoint(ckpt_path, _payload(tr, opts, gen, device_gen, strategy, psnr_now))
         write_history(history, out_dir / "history.jsonl")
@@ -253,10 +230,10 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if "psnr" in res.parts:
                 p = res.parts["psnr"]
                 psnr_now = p if psnr_now is None else 0.9 * psnr_now + 0.1 * p
-            pending.append(_Pending(it, _row(loss.detach(), res.parts, state, psnr_now), state.model.n,
-                                    lam_ev))
+            row = history_row(loss.detach(), res.parts, state, psnr_now)
+            pending.append(PendingRow(it, row, state.model.n, lam_ev))
             if (it + 1) % FLUSH_EVERY == 0:
-                _flush(history, pending, bar)
+                flush_pending(history, pending, bar)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
                 save()
@@ -375,91 +352,3 @@ def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int
             continue
         opt.step()
         opt.zero_grad(set_to_none=True)
-
-
-@dataclass
-class _Pending:
-    """An iteration recorded but not yet read back: ``row`` from :func:`_row`, on the device."""
-
-    iteration: int
-    row: torch.Tensor
-    n_gaussians: int
-    event_weight: float
-
-
-def _row(loss: torch.Tensor, parts: dict[str, torch.Tensor], state: FusionState,
-         psnr: torch.Tensor | None) -> torch.Tensor:
-    """``[5 + 2C]`` float32 on the device: loss, blur, event and EDI terms (NaN when off), running
-    PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
-    nan = loss.new_full((), math.nan, dtype=torch.float32)
-    terms = [loss, parts.get("blur", nan), parts.get("event", nan), parts.get("edi", nan),
-             nan if psnr is None else psnr]
-    with torch.no_grad():
-        tp, tn = state.threshold.scalar()
-    return torch.cat([torch.stack([t.float() for t in terms]), tp.reshape(-1).float(),
-                      tn.reshape(-1).float()])
-
-
-def _flush(h: History, pending: list[_Pending], bar) -> None:
-    """Read the pending rows back from the device at once (one sync) into ``h``; update ``bar``.
-
-    Raises:
-        InputError: a recorded loss is NaN or infinite (the training diverged; the rasteriser's own
-            value checks are off in the loop).
-    """
-    if not pending:
-        return
-    for p, v in zip(pending, torch.stack([p.row for p in pending]).tolist()):
-        for name, x in zip(("loss", "blur", "event", "edi", "psnr_input"), v):
-            getattr(h, name).append(x)
-        c = (len(v) - 5) // 2
-        h.theta_pos.append(v[5:5 + c])
-        h.theta_neg.append(v[5 + c:])
-        h.iteration.append(p.iteration)
-        h.n_gaussians.append(p.n_gaussians)
-        h.event_weight.append(float(p.event_weight))
-        if not math.isfinite(v[0]):
-            raise InputError("training", "loss", "finite values (the training diverged: lower the "
-                             "learning rates?)", f"{v[0]} at iteration {p.iteration}")
-    pending.clear()
-    bar.set_postfix(loss=f"{h.loss[-1]:.4f}", psnr=f"{h.psnr_input[-1]:.2f}", n=h.n_gaussians[-1])
-
-
-HISTORY_KEYS = ("iteration", "loss", "blur", "event", "edi", "event_weight", "theta_pos", "theta_neg",
-                "n_gaussians", "psnr_input", "step_seconds")
-
-
-def history_rows(h: History) -> list[dict]:
-    """One plain dict per recorded iteration: total loss, each term (NaN when off), the event weight
-    (λ_ev, or α in event-only mode), θ per polarity and channel, the number of Gaussians, the
-    running PSNR of the re-rendered blurry frames and the step time."""
-    n = len(h.iteration)
-    rows = []
-    for i in range(n):
-        row = {}
-        for k in HISTORY_KEYS:
-            v = getattr(h, k)
-            row[k] = v[i] if i < len(v) else None
-        rows.append(row)
-    return rows
-
-
-def write_history(h: History, path: Path) -> None:
-    """``history.jsonl`` (one JSON object per recorded iteration; NaN written as null), atomically."""
-    import json
-
-    from fusiongs.atomic import write_text
-
-    def clean(v):
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        if isinstance(v, list):
-            return [clean(x) for x in v]
-        return v
-
-    lines = [json.dumps({k: clean(v) for k, v in row.items()}) for row in history_rows(h)]
-    write_text(path, "\n".join(lines) + ("\n" if lines else ""))
-
-
-def as_numpy_images(x: torch.Tensor) -> np.ndarray:
-    return x.detach().cpu().numpy().astype(np.float32)

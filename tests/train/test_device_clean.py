@@ -219,21 +219,21 @@ def test_count_maps_on_the_device_equal_the_event_streams(scenes, scene):
 
 
 def test_records_are_read_back_together_and_a_diverged_loss_stops_training():
-    from fusiongs.train.trainer import History, _flush, _Pending
+    from fusiongs.train.history import History, PendingRow, flush_pending
 
     class Bar:
         def set_postfix(self, **kw):
             self.postfix = kw
 
     h, bar = History(), Bar()
-    pending = [_Pending(0, torch.tensor([1.0, 0.5, math.nan, math.nan, 20.0, 0.2, 0.3]), 10, 0.0),
-               _Pending(1, torch.tensor([0.9, 0.4, 0.1, math.nan, 21.0, 0.21, 0.31]), 12, 0.1)]
-    _flush(h, pending, bar)
+    pending = [PendingRow(0, torch.tensor([1.0, 0.5, math.nan, math.nan, 20.0, 0.2, 0.3]), 10, 0.0),
+               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, math.nan, 21.0, 0.21, 0.31]), 12, 0.1)]
+    flush_pending(h, pending, bar)
     assert not pending and h.iteration == [0, 1] and h.n_gaussians == [10, 12]
     assert h.loss == pytest.approx([1.0, 0.9]) and math.isnan(h.event[0]) and h.event[1] == pytest.approx(0.1)
     assert h.theta_pos == [[pytest.approx(0.2)], [pytest.approx(0.21)]] and bar.postfix["n"] == 12
     with pytest.raises(InputError, match="nan at iteration 2"):
-        _flush(h, [_Pending(2, torch.tensor([math.nan] * 7), 12, 0.1)], bar)
+        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 7), 12, 0.1)], bar)
 
 
 # ------------------------------------------------------------------------------------------- CUDA
@@ -243,7 +243,7 @@ CUDA_CASES = ["grey-mse-crop-edi", "colour-pvc-demosaic", "event-only"]
 SAME_DRAWS = ["events.pixels=100000", "densify.enabled=false", "backend=auto"]
 #: fusiongs functions allowed to synchronise with the GPU inside the loop, and why.
 SYNC_ALLOWED = {
-    "_flush": "history and progress bar, every FLUSH_EVERY iterations and at checkpoints",
+    "flush_pending": "history and progress bar, every FLUSH_EVERY iterations and at checkpoints",
     "save_checkpoint": "checkpoints",
     # KNOWN, outside this change: camera/trajectory.py copies its B-spline basis to the device per
     # call (_BASIS.to(device)); events/cfa.py copies its demosaic masks and kernels per call

@@ -1,0 +1,125 @@
+"""The loss history of a run: per-iteration records kept on the device and read back in batches.
+
+On a GPU the training loop does not wait for the device: each iteration's record
+(:func:`history_row`) stays there and :func:`flush_pending` reads ``FLUSH_EVERY`` of them back at
+once (one synchronisation), and at checkpoints. ``history.jsonl`` is written from it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import torch
+
+from fusiongs.errors import InputError
+from fusiongs.train.state import FusionState
+
+FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
+
+
+@dataclass
+class History:
+    """Per-iteration curves kept for the report (one entry per iteration; read back from the
+    device every ``FLUSH_EVERY`` iterations and at checkpoints). ``step_seconds`` and the render /
+    backward times are host times: on a GPU they count kernel launches, not the device's work."""
+
+    iteration: list[int] = field(default_factory=list)
+    loss: list[float] = field(default_factory=list)
+    blur: list[float] = field(default_factory=list)
+    event: list[float] = field(default_factory=list)
+    edi: list[float] = field(default_factory=list)
+    theta_pos: list[list[float]] = field(default_factory=list)
+    theta_neg: list[list[float]] = field(default_factory=list)
+    n_gaussians: list[int] = field(default_factory=list)
+    event_weight: list[float] = field(default_factory=list)  # λ_ev (α in event-only mode)
+    psnr_input: list[float] = field(default_factory=list)    # running PSNR of re-rendered blurry frames
+    step_seconds: list[float] = field(default_factory=list)  # wall time of each iteration
+    seconds: float = 0.0
+    render_seconds: float = 0.0      # rasteriser forward passes
+    backward_seconds: float = 0.0    # backward through losses and rasteriser
+
+
+@dataclass
+class PendingRow:
+    """An iteration recorded but not yet read back: ``row`` from :func:`history_row`, on the device."""
+
+    iteration: int
+    row: torch.Tensor
+    n_gaussians: int
+    event_weight: float
+
+
+def history_row(loss: torch.Tensor, parts: dict[str, torch.Tensor], state: FusionState,
+         psnr: torch.Tensor | None) -> torch.Tensor:
+    """``[5 + 2C]`` float32 on the device: loss, blur, event and EDI terms (NaN when off), running
+    PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
+    nan = loss.new_full((), math.nan, dtype=torch.float32)
+    terms = [loss, parts.get("blur", nan), parts.get("event", nan), parts.get("edi", nan),
+             nan if psnr is None else psnr]
+    with torch.no_grad():
+        tp, tn = state.threshold.scalar()
+    return torch.cat([torch.stack([t.float() for t in terms]), tp.reshape(-1).float(),
+                      tn.reshape(-1).float()])
+
+
+def flush_pending(h: History, pending: list[PendingRow], bar) -> None:
+    """Read the pending rows back from the device at once (one sync) into ``h``; update ``bar``.
+
+    Raises:
+        InputError: a recorded loss is NaN or infinite (the training diverged; the rasteriser's own
+            value checks are off in the loop).
+    """
+    if not pending:
+        return
+    for p, v in zip(pending, torch.stack([p.row for p in pending]).tolist()):
+        for name, x in zip(("loss", "blur", "event", "edi", "psnr_input"), v):
+            getattr(h, name).append(x)
+        c = (len(v) - 5) // 2
+        h.theta_pos.append(v[5:5 + c])
+        h.theta_neg.append(v[5 + c:])
+        h.iteration.append(p.iteration)
+        h.n_gaussians.append(p.n_gaussians)
+        h.event_weight.append(float(p.event_weight))
+        if not math.isfinite(v[0]):
+            raise InputError("training", "loss", "finite values (the training diverged: lower the "
+                             "learning rates?)", f"{v[0]} at iteration {p.iteration}")
+    pending.clear()
+    bar.set_postfix(loss=f"{h.loss[-1]:.4f}", psnr=f"{h.psnr_input[-1]:.2f}", n=h.n_gaussians[-1])
+
+
+HISTORY_KEYS = ("iteration", "loss", "blur", "event", "edi", "event_weight", "theta_pos", "theta_neg",
+                "n_gaussians", "psnr_input", "step_seconds")
+
+
+def history_rows(h: History) -> list[dict]:
+    """One plain dict per recorded iteration: total loss, each term (NaN when off), the event weight
+    (λ_ev, or α in event-only mode), θ per polarity and channel, the number of Gaussians, the
+    running PSNR of the re-rendered blurry frames and the step time."""
+    n = len(h.iteration)
+    rows = []
+    for i in range(n):
+        row = {}
+        for k in HISTORY_KEYS:
+            v = getattr(h, k)
+            row[k] = v[i] if i < len(v) else None
+        rows.append(row)
+    return rows
+
+
+def write_history(h: History, path: Path) -> None:
+    """``history.jsonl`` (one JSON object per recorded iteration; NaN written as null), atomically."""
+    import json
+
+    from fusiongs.atomic import write_text
+
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+
+    lines = [json.dumps({k: clean(v) for k, v in row.items()}) for row in history_rows(h)]
+    write_text(path, "\n".join(lines) + ("\n" if lines else ""))
