@@ -20,7 +20,6 @@ fit against the truth (:func:`fusiongs.eval.metrics.affine_fit`), and the report
 from __future__ import annotations
 
 import sys
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,41 +186,6 @@ def anchor_run(state, scene, cfg) -> ColourAnchor:
     try:
         return fit_frame_anchor(np.stack(renders), fs.images, fs.response, cfg.events.grey_weights,
                                 fs.names)
-    except InputError as e:  # the outputs are written already: say so and keep them as rendered
+    except InputError as e:  # say so and keep the outputs as rendered
         print(f"fusiongs: no colour anchor ({e}); colours as rendered", file=sys.stderr)
         return ColourAnchor()
-
-
-def apply_to_outputs(anchor: ColourAnchor, images: Mapping[str, np.ndarray], out, video_fps: float
-                     ) -> dict[str, np.ndarray]:
-    """Rewrite the image outputs of ``fusiongs deblur`` with ``anchor`` applied.
-
-    Args:
-        anchor: from :func:`anchor_run`; nothing is written when it is not applied.
-        images: ``{name: sRGB}`` as returned by ``write_outputs``: ``renders/<name>.png`` and
-            ``deblur/<stem>`` (``deblurred/<stem>.png``, and the frames of ``deblurred.mp4``).
-        out: the output folder.
-        video_fps: frame rate of ``deblurred.mp4``.
-
-    Returns:
-        The anchored images, keyed as ``images``.
-    """
-    from pathlib import Path
-
-    from fusiongs.eval.video import write_mp4
-    from fusiongs.frames.image_io import write_png
-
-    if not anchor.applied:
-        return dict(images)
-    out = Path(out)
-    done = {k: apply_anchor(anchor, v) for k, v in images.items()}
-    deblurred = []
-    for k, img in done.items():
-        if k.startswith("deblur/"):
-            write_png(out / "deblurred" / f"{k.split('/', 1)[1]}.png", img)
-            deblurred.append(img)
-        else:
-            write_png(out / "renders" / f"{k}.png", img)
-    if deblurred:
-        write_mp4(out / "deblurred.mp4", deblurred, video_fps)
-    return done

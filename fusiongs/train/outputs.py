@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -115,35 +116,46 @@ def write_trajectory(tr: Trained, scene: Scene, path: Path) -> PoseSamples:
     return poses
 
 
-def write_outputs(tr: Trained, scene: Scene, out: Path) -> dict[str, np.ndarray]:
+def write_outputs(tr: Trained, scene: Scene, out: Path,
+                  adjust: Callable[[np.ndarray], np.ndarray] | None = None
+                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Write renders, deblurred frames and video, model, config, thresholds and the refined
     camera path (``trajectory.txt``).
 
+    Args:
+        adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
+            :func:`fusiongs.eval.colour_anchor.apply_anchor`); None writes them as rendered.
+
     Returns:
-        ``{name: sRGB image}`` for every ``renders`` entry and ``deblur/<stem>`` frame.
+        ``(rendered, written)``: ``{name: sRGB image}`` for every ``renders`` entry and
+        ``deblur/<stem>`` frame, as rendered and as written (the same dict without ``adjust``).
     """
     from fusiongs.eval.video import write_mp4
 
     state, cfg = tr.state, tr.config
     cam = scene.camera
-    images: dict[str, np.ndarray] = {}
+    rendered: dict[str, np.ndarray] = {}
     if scene.renders:
-        imgs = render_srgb(state, cam, [r.t for r in scene.renders], cfg.backend)
-        for r, img in zip(scene.renders, imgs):
-            write_png(out / "renders" / f"{r.name}.png", img)
-            images[r.name] = img
+        for r, img in zip(scene.renders, render_srgb(state, cam, [r.t for r in scene.renders], cfg.backend)):
+            rendered[r.name] = img
     if len(scene.frames):
-        mids = scene.frames.mid_times()
-        imgs = render_srgb(state, cam, mids, cfg.backend)
-        for name, img in zip(scene.frames.names, imgs):
-            write_png(out / "deblurred" / f"{name}.png", img)
-            images[f"deblur/{name}"] = img
-        write_mp4(out / "deblurred.mp4", list(imgs), cfg.output.video_fps)
+        imgs = render_srgb(state, cam, scene.frames.mid_times(), cfg.backend)
+        rendered.update({f"deblur/{name}": img for name, img in zip(scene.frames.names, imgs)})
+    written = rendered if adjust is None else {k: adjust(v) for k, v in rendered.items()}
+    deblurred = []
+    for key, img in written.items():
+        if key.startswith("deblur/"):
+            write_png(out / "deblurred" / f"{key.split('/', 1)[1]}.png", img)
+            deblurred.append(img)
+        else:
+            write_png(out / "renders" / f"{key}.png", img)
+    if deblurred:
+        write_mp4(out / "deblurred.mp4", deblurred, cfg.output.video_fps)
     save_ply(state.model, out / "model.ply")
     save_config(cfg, out / "config.yaml")
     write_thresholds(state, out / "thresholds.json")
     write_trajectory(tr, scene, out / TRAJECTORY_FILE)
-    return images
+    return rendered, written
 
 
 def read_gt(gt_dir: Path, names) -> dict[str, np.ndarray]:

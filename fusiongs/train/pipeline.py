@@ -4,6 +4,7 @@ the scene has it; held-out frames and sharpness without)."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -11,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from fusiongs.atomic import remove_temporaries, write_text
-from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_to_outputs
+from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_anchor
 from fusiongs.eval.evaluate import compare_methods, format_table
 from fusiongs.eval.holdout import format_heldout, frame_subset, holdout_indices, parse_holdout
 from fusiongs.frames.response import linear_to_srgb
@@ -257,9 +258,9 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
-    images = write_outputs(tr, scene, out)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
-    unanchored, images = images, apply_to_outputs(anchor, images, out, cfg.output.video_fps)
+    unanchored, images = write_outputs(tr, scene, out,
+                                       functools.partial(apply_anchor, anchor) if anchor.applied else None)
     if anchor.applied:
         log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
     n_it = max(tr.iteration, 1)

@@ -11,12 +11,10 @@ from fusiongs.eval.colour_anchor import (
     ColourAnchor,
     anchor_run,
     apply_anchor,
-    apply_to_outputs,
     fit_frame_anchor,
     fit_gain_offset,
 )
 from fusiongs.frames.frameset import FrameSet
-from fusiongs.frames.image_io import read_image
 from fusiongs.frames.response import linear_to_response, linear_to_srgb
 
 GAIN, OFFSET = np.array([1.6, 0.7, 0.9]), np.array([0.02, -0.05, 0.1])
@@ -79,19 +77,6 @@ def test_anchor_is_recorded_for_metrics_json():
     assert none["anchor"] == "none" and "affine fit only" in none["label"] and "gain" not in none
     frame = ColourAnchor(FRAME_ANCHOR, (1.0, 2.0, 3.0), (0.0, 0.1, 0.2), ("000000",), 10).as_dict()
     assert frame["anchor"] == "frame" and frame["gain"] == [1.0, 2.0, 3.0] and frame["space"] == "linear"
-
-
-def test_outputs_are_rewritten_with_the_anchor(rng, tmp_path):
-    img = linear_to_srgb(_render(rng)[0]).astype(np.float32)
-    images = {"novel_000": img, "deblur/000000": img}
-    a = ColourAnchor(FRAME_ANCHOR, tuple(GAIN), tuple(OFFSET), ("000000",), 1)
-    assert apply_to_outputs(ColourAnchor(), images, tmp_path, 12) == images  # no anchor: nothing written
-    assert not list(tmp_path.iterdir())
-    done = apply_to_outputs(a, images, tmp_path, 12)
-    for key, path in (("novel_000", "renders/novel_000.png"), ("deblur/000000", "deblurred/000000.png")):
-        np.testing.assert_allclose(read_image(tmp_path / path), done[key], atol=0.5 / 255 + 1e-6)
-    assert (tmp_path / "deblurred.mp4").stat().st_size > 0
-    assert np.abs(done["novel_000"] - img).max() > 0.05
 
 
 class _StubState:

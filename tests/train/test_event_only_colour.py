@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from fusiongs.cli import main
+from fusiongs.eval.metrics import psnr
+from fusiongs.frames.image_io import read_image
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.sim.write import write_simulated_scene
 
@@ -57,6 +59,13 @@ def test_one_frame_fixes_each_channels_gain_and_offset(one_frame, tmp_path, caps
     assert raw["delta_e00"] < before["delta_e00"] / 2 and fit["delta_e00"] <= raw["delta_e00"] + 0.5
     assert m["mean"]["deblur"]["fusiongs"]["psnr"] == pytest.approx(
         m["affine_fit"]["mean"]["deblur"]["fusiongs"]["psnr"], abs=1.0)
+    # the files hold the anchored images that were scored (written once, anchored before writing)
+    novel = [n for n in m["views"] if n.startswith("novel")]
+    assert novel
+    for name in novel:
+        png = read_image(tmp_path / "renders" / f"{name}.png")
+        gt = read_image(one_frame / "gt" / f"{name}.png")
+        assert psnr(png, gt) == pytest.approx(m["views"][name]["fusiongs"]["psnr"], abs=0.05)
 
 
 def test_event_loss_ends_below_its_value_at_the_start_of_the_alpha_ramp(events_only, tmp_path):
