@@ -196,8 +196,13 @@ def stereo_points(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera
     return torch.cat(pts), torch.cat(cols), torch.cat(confs)
 
 
-def far_bound(xyz: torch.Tensor, centres: torch.Tensor, least: float, most: float,
-              quantile: float = 0.9, margin: float = 1.25) -> float:
+def nearest_camera_distance(xyz: torch.Tensor, centres: torch.Tensor) -> torch.Tensor:
+    """``[M]`` float64 distance of each point ``xyz [M, 3]`` to the nearest camera centre ``[N, 3]``."""
+    return torch.cdist(xyz.double(), centres.double().to(xyz.device)).amin(1)
+
+
+def far_bound(dist: torch.Tensor, least: float, most: float, quantile: float = 0.9,
+              margin: float = 1.25) -> float:
     """A scene's far bound from its stereo points: ``margin`` times the ``quantile`` of their
     distances to the nearest camera centre, never below ``least`` nor above ``most``.
 
@@ -205,16 +210,15 @@ def far_bound(xyz: torch.Tensor, centres: torch.Tensor, least: float, most: floa
     its few weakly textured or low-parallax matches at the farthest planes.
 
     Args:
-        xyz: ``[M, 3]`` points (e.g. :func:`stereo_points`), scene units.
-        centres: ``[N, 3]`` camera centres.
+        dist: ``[M]`` the points' distances (:func:`nearest_camera_distance` of e.g.
+            :func:`stereo_points`), scene units.
         least, most: clamp of the bound (``least`` alone when there are no points).
 
     Returns:
         The far bound (scene units).
     """
-    if xyz.shape[0] == 0:
+    if dist.numel() == 0:
         return float(least)
-    dist = torch.cdist(xyz.double(), centres.double().to(xyz.device)).amin(1)
     k = min(max(1, round(quantile * dist.numel())), dist.numel())  # kthvalue: no size limit
     q = float(dist.kthvalue(k).values)
     return float(min(max(margin * q, least), most))

@@ -94,7 +94,7 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
         ConfigError: ``stereo`` without at least two images, or with ``init.depth_min <= 0``.
     """
     from fusiongs.camera.frusta import sample_in_frusta
-    from fusiongs.camera.stereo import far_bound, stereo_points
+    from fusiongs.camera.stereo import far_bound, nearest_camera_distance, stereo_points
     from fusiongs.errors import ConfigError
 
     ini = cfg.init
@@ -119,11 +119,10 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     if ini.far_from_stereo:
         wide = max(STEREO_FAR_FACTOR * ini.depth_min, ini.depth_max)
         xyz, rgb = sweep(wide)
-        centres = c2w[:, :3, 3].detach().cpu()
-        far = far_bound(xyz, centres, ini.depth_max, wide)
+        dist = nearest_camera_distance(xyz, c2w[:, :3, 3].detach().cpu())
+        far = far_bound(dist, ini.depth_max, wide)
         if far > ini.depth_max:  # a deep scene: the wide sweep's points, up to the far bound
-            near_enough = torch.cdist(xyz.double(), centres.double()).amin(1) <= far
-            xyz, rgb = xyz[near_enough], rgb[near_enough]
+            xyz, rgb = xyz[dist <= far], rgb[dist <= far]
         else:  # within depth_max: the finer sweep of [depth_min, depth_max], as without the option
             xyz, rgb = sweep(far)
     else:

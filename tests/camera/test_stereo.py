@@ -11,6 +11,7 @@ from fusiongs.camera.stereo import (
     depth_from_cost,
     far_bound,
     inverse_depth_planes,
+    nearest_camera_distance,
     neighbour_indices,
     plane_sweep_cost,
     stereo_points,
@@ -204,14 +205,18 @@ def test_auto_init_is_stereo_with_two_frames_and_random_otherwise(views):
 
 def test_far_bound_is_a_margin_over_a_high_quantile_of_the_distances():
     centres = torch.zeros(2, 3)
+
+    def bound(points, least, most):
+        return far_bound(nearest_camera_distance(points, centres), least, most)
+
     xyz = torch.zeros(1000, 3)
     xyz[:, 2] = torch.arange(1, 1001, dtype=torch.float32) / 10  # distances 0.1 .. 100
-    assert far_bound(xyz, centres, 1.0, 1e4) == pytest.approx(1.25 * 90.0, rel=1e-3)
-    assert far_bound(xyz, centres, 1.0, 50.0) == 50.0                 # at most `most`
-    assert far_bound(xyz, centres, 200.0, 1e4) == 200.0               # at least `least`
-    assert far_bound(torch.zeros(0, 3), centres, 12.0, 1e4) == 12.0   # no points: `least`
+    assert bound(xyz, 1.0, 1e4) == pytest.approx(1.25 * 90.0, rel=1e-3)
+    assert bound(xyz, 1.0, 50.0) == 50.0                 # at most `most`
+    assert bound(xyz, 200.0, 1e4) == 200.0               # at least `least`
+    assert bound(torch.zeros(0, 3), 12.0, 1e4) == 12.0   # no points: `least`
     xyz[-50:, 2] = 1e6  # a few matches at the end of the sweep do not move it
-    assert far_bound(xyz, centres, 1.0, 1e7) == pytest.approx(1.25 * 90.0, rel=1e-3)
+    assert bound(xyz, 1.0, 1e7) == pytest.approx(1.25 * 90.0, rel=1e-3)
 
 
 def test_the_far_bound_reaches_a_far_wall_from_the_stereo_points():
