@@ -7,7 +7,8 @@ chosen on ``--split tuning``; figures are reported from ``--split test`` only.
 
 Per scene the table prints the true ON/OFF thresholds, the estimate per channel and the relative
 error; with ``--deblur`` also deblur-view PSNR of the blurry input, EDI with the true thresholds,
-EDI with the estimated ones, fusiongs without events and fusiongs (all measured in this run).
+EDI with the estimated ones, fusiongs without events, fusiongs's renders before the exposure-ratio
+correction (``render``) and fusiongs (all measured in this run).
 
     PYTHONPATH=. python benchmarks/bench_calibrate.py --split test --seeds 1000-1011
     PYTHONPATH=. python benchmarks/bench_calibrate.py --split test --seeds 1000-1011 --deblur
@@ -95,6 +96,8 @@ def deblur_row(scene_dir: Path, out: Path, config: str | None, overrides: list[s
         if key == "fusiongs":
             for peer in ("blurry", "edi", "edi_true_theta"):
                 res[peer] = m[peer]["psnr"] if peer in m else float("nan")
+            # the renders before the exposure-ratio correction (the run's own column; absent when off)
+            res["render"] = m["fusiongs_render"]["psnr"] if "fusiongs_render" in m else float("nan")
             res["seconds"] = r["seconds"]
     return res
 
@@ -117,13 +120,13 @@ def format_rows(rows: list[dict]) -> str:
 
 
 def format_deblur(rows: list[dict]) -> str:
-    keys = ("blurry", "edi_true_theta", "edi", "no_events", "fusiongs")
+    keys = ("blurry", "edi_true_theta", "edi", "no_events", "render", "fusiongs")
     lines = [f"{'scene':<14}" + "".join(f"{k:>16}" for k in keys) + f"{'events gain':>13}"]
     for r in rows:
         d = r["deblur"]
-        lines.append(f"{r['scene']:<14}" + "".join(f"{d[k]:>16.2f}" for k in keys)
+        lines.append(f"{r['scene']:<14}" + "".join(f"{d.get(k, float('nan')):>16.2f}" for k in keys)
                      + f"{d['fusiongs'] - d['no_events']:>+13.2f}")
-    mean = {k: float(np.mean([r["deblur"][k] for r in rows])) for k in keys}
+    mean = {k: float(np.mean([r["deblur"].get(k, float("nan")) for r in rows])) for k in keys}
     lines.append(f"{'mean':<14}" + "".join(f"{mean[k]:>16.2f}" for k in keys)
                  + f"{mean['fusiongs'] - mean['no_events']:>+13.2f}")
     gain = mean["fusiongs"] - mean["edi_true_theta"]

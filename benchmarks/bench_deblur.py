@@ -2,8 +2,10 @@
 
 Scenes come from ``fusiongs simulate`` (173x130, 12 frames over 1 s, ~8 million events by default;
 grey and RGGB events); each is deblurred with a config, and the table prints mean deblur-view and
-novel-view PSNR / SSIM for the blurry input, EDI (threshold from consecutive-frame consistency) and
-fusiongs, all measured in the same run, plus seconds per iteration and the share spent rendering.
+novel-view PSNR / SSIM for the blurry input, EDI (threshold from consecutive-frame consistency),
+fusiongs's renders and its deblurred frames (the renders after the exposure-ratio correction; novel
+instants are renders only), all measured in the same run, plus seconds per iteration and the share
+spent rendering.
 ``--ablation`` adds variants on the first scene (and the first colour scene for mask vs demosaic).
 
     PYTHONPATH=. python benchmarks/bench_deblur.py --presets boxes,wall --seeds 0,1 --cfa none,RGGB
@@ -84,16 +86,18 @@ def mean_row(results: dict) -> tuple[str, list[str]]:
         return sum(vals) / len(vals)
 
     fus = m(lambda r: r["mean"]["deblur"]["fusiongs"]["psnr"])
+    rend = m(lambda r: r["mean"]["deblur"].get("fusiongs_render", r["mean"]["deblur"]["fusiongs"])["psnr"])
     edi = m(lambda r: r["mean"]["deblur"]["edi"]["psnr"])
     blur = m(lambda r: r["mean"]["deblur"]["blurry"]["psnr"])
     nov = m(lambda r: r["mean"]["novel"]["fusiongs"]["psnr"])
     mins = m(lambda r: r["wall_seconds"] / 60)
-    line = (f"| mean of {len(results)} | {blur:.2f} | {edi:.2f} | {fus:.2f} | {nov:.2f} | "
-            f"{fus - edi:+.2f} | {fus - blur:+.2f} | {nov - fus:+.2f} | | | {mins:.1f} (wall) |")
+    line = (f"| mean of {len(results)} | {blur:.2f} | {edi:.2f} | {rend:.2f} | {fus:.2f} | {nov:.2f} | "
+            f"{fus - edi:+.2f} | {fus - blur:+.2f} | {nov - rend:+.2f} | | | {mins:.1f} (wall) |")
     checks = [f"deblur >= EDI + 2 dB: {fus - edi:+.2f} dB -> {'met' if fus - edi >= 2 else 'NOT met'}",
               f"deblur >= blurry + 8 dB: {fus - blur:+.2f} dB -> {'met' if fus - blur >= 8 else 'NOT met'}",
-              f"novel within 2 dB of deblur: {nov - fus:+.2f} dB -> "
-              f"{'met' if abs(nov - fus) <= 2 else 'NOT met'}",
+              f"novel within 2 dB of the renders at the deblur views: {nov - rend:+.2f} dB -> "
+              f"{'met' if abs(nov - rend) <= 2 else 'NOT met'}; of the corrected deblurred frames: "
+              f"{nov - fus:+.2f} dB",
               f"<= 10 min per scene (wall, all included): {mins:.1f} min -> "
               f"{'met' if mins <= 10 else 'NOT met'}"]
     return line, checks
@@ -108,16 +112,18 @@ def row(label: str, r: dict) -> str:
     share = r["render_seconds"] / max(r["seconds"], 1e-9)
     back = r["backward_seconds"] / max(r["seconds"], 1e-9)
     b = d["blurry"]
+    rend = d.get("fusiongs_render", f)  # before the exposure-ratio correction (= f when it is off)
     return (f"| {label} | {b['psnr']:.2f} / {b['ssim']:.3f} | {edi['psnr']:.2f} / {edi['ssim']:.3f} | "
+            f"{rend['psnr']:.2f} / {rend['ssim']:.3f} | "
             f"{f['psnr']:.2f} / {f['ssim']:.3f} | {nov['psnr']:.2f} / {nov['ssim']:.3f} | "
             f"{f['psnr'] - edi['psnr']:+.2f} | {f['psnr'] - b['psnr']:+.2f} | "
-            f"{nov['psnr'] - f['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | "
+            f"{nov['psnr'] - rend['psnr']:+.2f} | {s_it:.3f} | {share:.0%} / {back:.0%} | "
             f"{r['seconds'] / 60:.1f} |")
 
 
-HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs deblur | fusiongs novel | vs EDI | vs blurry | "
-          "novel-deblur | s/it | render fwd/bwd share | train min |\n"
-          "|---|---|---|---|---|---|---|---|---|---|---|")
+HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs render (deblur views) | fusiongs deblur | fusiongs novel | "
+          "vs EDI | vs blurry | novel-render | s/it | render fwd/bwd share | train min |\n"
+          "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def main(argv=None) -> int:

@@ -117,31 +117,47 @@ def write_trajectory(tr: Trained, scene: Scene, path: Path) -> PoseSamples:
 
 
 def write_outputs(tr: Trained, scene: Scene, out: Path,
-                  adjust: Callable[[np.ndarray], np.ndarray] | None = None
-                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+                  adjust: Callable[[np.ndarray], np.ndarray] | None = None,
+                  kept: np.ndarray | None = None
+                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Write renders, deblurred frames and video, model, config, thresholds and the refined
     camera path (``trajectory.txt``).
+
+    The deblurred frames are the renders at the frames' mid-exposure; with ``output.exposure_ratio``
+    on, they and every requested render inside a frame's exposure are exposure-ratio corrected
+    (:mod:`fusiongs.train.exposure_ratio`: their colours then come from the frame itself, so
+    ``adjust`` is not applied to them).
 
     Args:
         adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
             :func:`fusiongs.eval.colour_anchor.apply_anchor`); None writes them as rendered.
+        kept: the frames of ``scene`` the run was trained on (``--holdout``); None: all of them.
 
     Returns:
-        ``(rendered, written)``: ``{name: sRGB image}`` for every ``renders`` entry and
-        ``deblur/<stem>`` frame, as rendered and as written (the same dict without ``adjust``).
+        ``(rendered, written, render_only)``: ``{name: sRGB image}`` for every ``renders`` entry
+        and ``deblur/<stem>`` frame as rendered and as written (the same dict without ``adjust``
+        or correction), and the images the correction replaced as rendered, ``adjust`` applied.
     """
     from fusiongs.eval.video import write_mp4
+    from fusiongs.train.exposure_ratio import corrected_renders, frame_log_gains
 
     state, cfg = tr.state, tr.config
-    cam = scene.camera
-    rendered: dict[str, np.ndarray] = {}
-    if scene.renders:
-        for r, img in zip(scene.renders, render_srgb(state, cam, [r.t for r in scene.renders], cfg.backend)):
-            rendered[r.name] = img
-    if len(scene.frames):
-        imgs = render_srgb(state, cam, scene.frames.mid_times(), cfg.backend)
-        rendered.update({f"deblur/{name}": img for name, img in zip(scene.frames.names, imgs)})
+    keys = [r.name for r in scene.renders] + [f"deblur/{name}" for name in scene.frames.names]
+    times = np.concatenate([np.asarray([r.t for r in scene.renders], np.float64), scene.frames.mid_times()])
+    corrected: dict[str, np.ndarray] = {}
+    if cfg.output.exposure_ratio and len(scene.frames):
+        gains = frame_log_gains(state, len(scene.frames), kept)
+        plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
+                                                cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend)
+        srgb = linear_to_srgb(np.clip(plain, 0, 1)).astype(np.float32)
+        fixed = linear_to_srgb(np.clip(fixed, 0, 1)).astype(np.float32)
+        corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}
+    else:
+        srgb = render_srgb(state, scene.camera, times, cfg.backend)
+    rendered = dict(zip(keys, srgb))
     written = rendered if adjust is None else {k: adjust(v) for k, v in rendered.items()}
+    render_only = {k: written[k] for k in corrected}
+    written = {**written, **corrected}
     deblurred = []
     for key, img in written.items():
         if key.startswith("deblur/"):
@@ -155,7 +171,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     save_config(cfg, out / "config.yaml")
     write_thresholds(state, out / "thresholds.json")
     write_trajectory(tr, scene, out / TRAJECTORY_FILE)
-    return rendered, written
+    return rendered, written, render_only
 
 
 def read_gt(gt_dir: Path, names) -> dict[str, np.ndarray]:

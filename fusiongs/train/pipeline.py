@@ -79,14 +79,16 @@ def _by_view(images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
 def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], out: Path,
                      gt_dir: Path | None, heldout: tuple[dict, dict] | None = None,
                      anchor: ColourAnchor | None = None,
-                     unanchored: dict[str, np.ndarray] | None = None) -> dict:
+                     unanchored: dict[str, np.ndarray] | None = None,
+                     render_only: dict[str, np.ndarray] | None = None) -> dict:
     """metrics.json and report.png; returns the metrics.
 
     Against truth when ``gt_dir`` holds images named like the outputs; always the no-reference
     sharpness of the deblurred frames (:func:`fusiongs.eval.holdout.compare_sharpness`) and, with
     ``heldout`` (from :func:`score_holdout`), the held-out scores and pictures. With no frame or
     an applied colour ``anchor`` (``images`` anchored, ``unanchored`` before), also the colour
-    figures of :func:`fusiongs.eval.evaluate.colour_metrics` and the anchor.
+    figures of :func:`fusiongs.eval.evaluate.colour_metrics` and the anchor. ``render_only``: the
+    deblurred frames before the exposure-ratio correction, scored as ``fusiongs_render``.
     """
     from fusiongs.eval.evaluate import colour_metrics
     from fusiongs.eval.holdout import compare_sharpness
@@ -97,6 +99,8 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     ours = _by_view(images)
     gt = read_gt(gt_dir, ours.keys()) if gt_dir is not None and gt_dir.is_dir() else {}
     methods = {"fusiongs": ours, **baseline_images(scene, tr.initial_thresholds)}
+    if render_only:
+        methods["fusiongs_render"] = _by_view(render_only)
     colour = len(scene.frames) == 0 or anchor.applied  # colours the events alone do not fix
     if gt:
         result = compare_methods(methods, gt, delta_e=anchor.applied)
@@ -259,8 +263,9 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
-    unanchored, images = write_outputs(tr, scene, out,
-                                       functools.partial(apply_anchor, anchor) if anchor.applied else None)
+    unanchored, images, render_only = write_outputs(
+        tr, scene, out, functools.partial(apply_anchor, anchor) if anchor.applied else None,
+        kept if held.size else None)
     if anchor.applied:
         log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
     n_it = max(tr.iteration, 1)
@@ -274,7 +279,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")
         log(format_heldout(heldout[0]))
     result = evaluate_outputs(tr, scene, images, out, scene.root / "gt" if scene.root else None, heldout,
-                              anchor, unanchored)
+                              anchor, unanchored, render_only)
     if "mean" in result:
         log(format_table(result))
         if "affine_fit" in result:

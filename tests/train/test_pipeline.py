@@ -39,7 +39,7 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     assert len(theta["theta_pos"]) == 1 and theta["theta_pos"][0] > 0
     metrics = json.loads((tiny_run / "metrics.json").read_text())
     # a simulated scene knows its true thresholds: EDI with them is printed beside EDI estimated
-    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "blurry", "edi", "edi_true_theta"}
+    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "fusiongs_render", "blurry", "edi", "edi_true_theta"}
     rows = [json.loads(line) for line in (tiny_run / "history.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == list(range(10))
     assert all(r["loss"] is not None and r["n_gaussians"] > 0 and len(r["theta_pos"]) == 1 for r in rows)
@@ -161,7 +161,7 @@ def test_holdout_without_truth_scores_held_out_frames_and_writes_report(three_fr
     metrics = json.loads((out / "metrics.json").read_text())
     assert "mean" not in metrics and "gt/" in metrics["note"]
     assert metrics["heldout"]["mean"] == doc["mean"]
-    assert set(metrics["sharpness"]) == {"fusiongs", "blurry", "edi"}
+    assert set(metrics["sharpness"]) == {"fusiongs", "fusiongs_render", "blurry", "edi"}
     assert all(v["n"] == 3 and v["tenengrad"] > 0 for v in metrics["sharpness"].values())
     assert read_image(out / "report.png").shape[1] > 100
 

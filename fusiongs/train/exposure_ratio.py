@@ -1,0 +1,131 @@
+"""Exposure-ratio correction: the captured frame's own detail put back into the deblurred frame.
+
+The blur model (METHOD.md §1) says a frame is ``B = CRF(g · mean_k L(t_k))`` over its exposure.
+The fitted scene renders ``R(t)`` and predicts ``B̂ = g · mean_k R(t_k)`` (linear). Write the true
+sharp image as ``L(t) = ρ · R(t)`` with a per-pixel factor ``ρ`` that stays the same over the
+exposure (what the model lacks: texture finer than its Gaussians, small geometry and colour
+errors); then the exposure model gives ``ρ = B / B̂`` and the corrected sharp frame is
+
+    L̂(t) = R(t) · (B + ε) / (B̂ + ε)            (linear light, per pixel and channel)
+
+This is the relation EDI inverts (Pan et al., "Bringing a Blurry Frame Alive at High Frame-Rate
+with an Event Camera", CVPR 2019: ``L(t) = B / mean_s exp(c · E(t → s))``) with the temporal profile
+``R(t_k) / R(t)`` taken from the fitted scene (frames and events together) instead of from the
+events alone. Where the model already explains the frame, ``ρ = 1`` and nothing changes; where it
+misses detail, the frame supplies it; the assumption fails where the missing detail moves a lot
+within the exposure (heavy blur), and there it brings back that detail blurred.
+
+``ε`` (linear units) keeps dark pixels, where read noise dominates, from amplifying noise; its
+default was chosen on tuning seeds (benchmarks/RESULTS.md, session 10). Pixels that are saturated
+in the frame carry no ratio (the true value may be higher): there ``ρ = 1``.
+
+Only the frames' own instants can be corrected: renders at other instants (``renders/``, the
+held-out prediction of ``--holdout``) stay the scene's renders.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from fusiongs.frames.response import response_to_linear
+from fusiongs.io.scene import Scene
+from fusiongs.losses.blur import exposure_instants
+from fusiongs.losses.event import to_grey
+from fusiongs.train.state import FusionState
+
+SATURATED = 1.0 - 0.5 / 255.0  # encoded frame values at or above this are clipped (8-bit full scale)
+
+
+def exposure_ratio(observed: torch.Tensor, predicted: torch.Tensor, saturated: torch.Tensor,
+                   eps: float) -> torch.Tensor:
+    """Per-pixel ratio ``ρ = (B + ε) / (B̂ + ε)``, 1 where the frame is saturated.
+
+    Args:
+        observed: ``[..., H, W, C]`` the captured frame, linear (>= 0).
+        predicted: ``[..., H, W, C]`` the model's blurry frame, linear, same device.
+        saturated: ``[..., H, W, C]`` bool, True where the captured value is clipped.
+        eps: linear offset > 0.
+
+    Returns:
+        ``[..., H, W, C]`` the ratio (unitless, > 0).
+    """
+    ratio = (observed.clamp_min(0) + eps) / (predicted.clamp_min(0) + eps)
+    return torch.where(saturated, torch.ones_like(ratio), ratio)
+
+
+def containing_frame(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``[T]`` index of the frame whose exposure ``[t_start, t_end]`` contains each instant, -1 where
+    none does (of two overlapping exposures, the one whose mid-exposure is nearer)."""
+    s, e = np.asarray(t_start, np.float64), np.asarray(t_end, np.float64)
+    t = np.asarray(times, np.float64).reshape(-1, 1)
+    inside = (t >= s) & (t <= e)
+    dist = np.where(inside, np.abs(t - 0.5 * (s + e)), np.inf)
+    best = dist.argmin(axis=1) if s.size else np.zeros(t.shape[0], np.int64)
+    return np.where(inside.any(axis=1), best, -1) if s.size else np.full(t.shape[0], -1)
+
+
+@torch.no_grad()
+def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.Tensor, n_samples: int,
+                      eps: float, grey_weights: tuple[float, float, float], backend: str = "auto"
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sharp linear renders at ``times``, as rendered and exposure-ratio corrected.
+
+    An instant inside a frame's exposure is corrected with that frame's ratio (the ratio is assumed
+    constant over the exposure); other instants are left as rendered.
+
+    Args:
+        state: the fitted scene, camera path.
+        scene: its frames (``[F, H, W, C]``, C = 1 or 3) and camera.
+        times: ``[T]`` instants (s).
+        log_gain: ``[F]`` each frame's log exposure gain ``log g`` (on the state's device).
+        n_samples: renders per exposure for the predicted blurry frame (the training's).
+        eps: the ratio's linear offset (``output.ratio_eps``).
+        grey_weights: ``w`` of a monochrome frame ``w · L``; its ratio scales all three channels.
+
+    Returns:
+        ``(rendered, corrected, frame)``: ``[T, H, W, 3]`` float32 linear radiance (not clipped),
+        and ``[T]`` the frame whose ratio was applied (-1: none).
+    """
+    fs = scene.frames
+    times = np.asarray(times, np.float64).reshape(-1)
+    frame = containing_frame(fs.t_start, fs.t_end, times) if len(fs) else np.full(times.size, -1)
+    device = state.model.means.device
+    h, w = scene.camera.height, scene.camera.width
+    rendered = np.zeros((times.size, h, w, 3), np.float32)
+    corrected = np.zeros_like(rendered)
+    for i in np.unique(frame):
+        at = np.flatnonzero(frame == i)
+        if i < 0:
+            for j in range(0, at.size, 8):
+                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[at[j:j + 8]]).to(device), backend)
+                rendered[at[j:j + 8]] = corrected[at[j:j + 8]] = lin.cpu().numpy()
+            continue
+        t = torch.cat([exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples),
+                       torch.as_tensor(times[at])])
+        lin, _, _ = state.render(scene.camera, t.to(device), backend)
+        predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
+        image = torch.as_tensor(np.asarray(fs.images[i], np.float32)).to(device)
+        observed = torch.as_tensor(np.asarray(response_to_linear(fs.images[i], fs.response), np.float32)).to(device)
+        if observed.shape[-1] == 1:
+            predicted = to_grey(predicted, grey_weights)
+        ratio = exposure_ratio(observed, predicted, image >= SATURATED, eps)
+        rendered[at] = lin[n_samples:].cpu().numpy()
+        corrected[at] = (lin[n_samples:] * ratio).cpu().numpy()
+    return rendered, corrected, frame
+
+
+def frame_log_gains(state: FusionState, n_frames: int, kept: np.ndarray | None = None) -> torch.Tensor:
+    """``[n_frames]`` log exposure gain of every frame of a scene, on the state's device.
+
+    A run trained on the frames ``kept`` (``--holdout``) learned gains for those only; the others
+    take the log of the mean learned gain (1 when gains are not learned). ``kept = None``: the run
+    saw every frame, in order.
+    """
+    learned = state.log_gain.detach()
+    if kept is None:
+        return learned
+    out = torch.log(learned.exp().mean()).expand(n_frames).clone() if learned.numel() \
+        else torch.zeros(n_frames, device=learned.device)
+    out[torch.as_tensor(np.asarray(kept, np.int64)).to(learned.device)] = learned
+    return out
