@@ -121,8 +121,8 @@ def row(label: str, r: dict) -> str:
             f"{r['seconds'] / 60:.1f} |")
 
 
-HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs render (deblur views) | fusiongs deblur | fusiongs novel | "
-          "vs EDI | vs blurry | novel-render | s/it | render fwd/bwd share | train min |\n"
+HEADER = ("| run | blurry PSNR/SSIM | EDI | fusiongs render (deblur views) | fusiongs deblur | "
+          "fusiongs novel | vs EDI | vs blurry | novel-render | s/it | render fwd/bwd share | train min |\n"
           "|---|---|---|---|---|---|---|---|---|---|---|---|")
 
 

@@ -98,15 +98,17 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         at = np.flatnonzero(frame == i)
         if i < 0:
             for j in range(0, at.size, 8):
-                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[at[j:j + 8]]).to(device), backend)
-                rendered[at[j:j + 8]] = corrected[at[j:j + 8]] = lin.cpu().numpy()
+                batch = at[j:j + 8]
+                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[batch]).to(device), backend)
+                rendered[batch] = corrected[batch] = lin.cpu().numpy()
             continue
         t = torch.cat([exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples),
                        torch.as_tensor(times[at])])
         lin, _, _ = state.render(scene.camera, t.to(device), backend)
         predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
-        image = torch.as_tensor(np.asarray(fs.images[i], np.float32)).to(device)
-        observed = torch.as_tensor(np.asarray(response_to_linear(fs.images[i], fs.response), np.float32)).to(device)
+        encoded = np.asarray(fs.images[i], np.float32)
+        image = torch.as_tensor(encoded).to(device)
+        observed = torch.as_tensor(np.asarray(response_to_linear(encoded, fs.response), np.float32)).to(device)
         if observed.shape[-1] == 1:
             predicted = to_grey(predicted, grey_weights)
         ratio = exposure_ratio(observed, predicted, image >= SATURATED, eps)

@@ -178,7 +178,7 @@ class OutputSettings:
     progress: bool = True            # progress bar with loss and PSNR
     video_fps: int = 12
     checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
-    exposure_ratio: bool = True      # deblurred frames: render x (frame / predicted frame), train/exposure_ratio.py
+    exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (train/exposure_ratio.py)
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
 
     def __post_init__(self) -> None:
