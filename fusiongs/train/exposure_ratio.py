@@ -108,7 +108,8 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
         encoded = np.asarray(fs.images[i], np.float32)
         image = torch.as_tensor(encoded).to(device)
-        observed = torch.as_tensor(np.asarray(response_to_linear(encoded, fs.response), np.float32)).to(device)
+        linear = np.asarray(response_to_linear(encoded, fs.response), np.float32)
+        observed = torch.as_tensor(linear).to(device)
         if observed.shape[-1] == 1:
             predicted = to_grey(predicted, grey_weights)
         ratio = exposure_ratio(observed, predicted, image >= SATURATED, eps)

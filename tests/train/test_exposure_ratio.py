@@ -42,9 +42,9 @@ class MovingPattern:
 
 
 def _scene(images, t_start, t_end, response="srgb"):
+    names = tuple(f"{i:06d}" for i in range(len(t_start)))
     frames = FrameSet(images=np.asarray(images, np.float32), t_start=np.asarray(t_start, np.float64),
-                      t_end=np.asarray(t_end, np.float64), names=tuple(f"{i:06d}" for i in range(len(t_start))),
-                      response=response)
+                      t_end=np.asarray(t_end, np.float64), names=names, response=response)
     return SimpleNamespace(frames=frames, camera=SimpleNamespace(height=H, width=W))
 
 

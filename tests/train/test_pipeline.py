@@ -39,7 +39,8 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     assert len(theta["theta_pos"]) == 1 and theta["theta_pos"][0] > 0
     metrics = json.loads((tiny_run / "metrics.json").read_text())
     # a simulated scene knows its true thresholds: EDI with them is printed beside EDI estimated
-    assert set(metrics["mean"]["deblur"]) == {"fusiongs", "fusiongs_render", "blurry", "edi", "edi_true_theta"}
+    expected = {"fusiongs", "fusiongs_render", "blurry", "edi", "edi_true_theta"}
+    assert set(metrics["mean"]["deblur"]) == expected
     rows = [json.loads(line) for line in (tiny_run / "history.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == list(range(10))
     assert all(r["loss"] is not None and r["n_gaussians"] > 0 and len(r["theta_pos"]) == 1 for r in rows)
