@@ -1,0 +1,133 @@
+"""Event-only colour over the simulator's sensor sweep, on seeds no default was chosen on (issue 18 §4).
+
+Each seed's scene is drawn by :func:`fusiongs.sim.sweep.sweep_scene_config` (preset, CFA, camera
+path and an event sensor from the whole calibration range) and written without frames
+(``fusiongs simulate --sweep-seed N --split S --frames 0 --novel 6``); it is reconstructed with
+``fusiongs deblur --config event_only``. Per scene the table prints the sensor, the floor peer (the
+leaky-integrator / high-pass intensity image of the events, the anchor of event-only training, at
+the same instants) and fusiongs: affine-fit PSNR / SSIM (EventNeRF's protocol: events fix neither
+brightness nor colour balance), the colour error ΔE00 after the fit, raw PSNR, and the distance to
+the floor; then the means and the issue's targets. Defaults are chosen on ``--split tuning``;
+figures are reported from ``--split test`` only.
+
+    PYTHONPATH=. python benchmarks/bench_event_only_sweep.py --split test --seeds 1000-1007
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch (numba's spinning threads)
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.bench_calibrate import parse_seeds  # noqa: E402
+from benchmarks.bench_event_only_diagnose import hpf_floor  # noqa: E402
+from fusiongs.cli import main as cli  # noqa: E402
+from fusiongs.eval.truth import read_sim_facts, true_thresholds  # noqa: E402
+from fusiongs.io.scene_io import load_scene  # noqa: E402
+from fusiongs.train.pipeline import run_deblur  # noqa: E402
+
+
+def make_scene(root: Path, split: str, seed: int, size: str, duration: float | None) -> Path:
+    """The seed's event-only scene (simulated once, then reused)."""
+    scene = root / "scenes" / f"{split}_{seed}"
+    if not (scene / "scene.json").is_file():
+        extra = ["--duration", str(duration)] if duration else []
+        rc = cli(["simulate", "--sweep-seed", str(seed), "--split", split, "--size", size, "--frames", "0",
+                  "--novel", "6", *extra, "-o", str(scene)])
+        if rc != 0:
+            raise SystemExit(f"simulate failed for seed {seed}")
+    return scene
+
+
+def run_scene(scene: Path, out: Path, config: str, overrides: list[str]) -> dict:
+    """Train (or read back a finished run with the same settings) and collect the row."""
+    saved = out / "bench_result.json"
+    key = {"config": config, "overrides": overrides}
+    if saved.is_file() and json.loads(saved.read_text()).get("key") == key:
+        return json.loads(saved.read_text())["row"]
+    t0 = time.perf_counter()
+    m = run_deblur(scene, out, config=config, overrides=["output.progress=false", *overrides],
+                   log=lambda *_: None)
+    wall = time.perf_counter() - t0
+    fit = m["affine_fit"]["mean"]["novel"]["fusiongs"]
+    row = {"affine_psnr": fit["psnr"], "affine_ssim": fit["ssim"], "delta_e00": fit.get("delta_e00"),
+           "raw_psnr": m["mean"]["novel"]["fusiongs"]["psnr"], "train_seconds": m["seconds"],
+           "wall_seconds": wall, "iterations": m["iterations"]}
+    out.mkdir(parents=True, exist_ok=True)
+    saved.write_text(json.dumps({"key": key, "row": row}, indent=2))
+    return row
+
+
+def describe(scene_dir: Path) -> dict:
+    """Preset, CFA and the true thresholds of a simulated scene."""
+    scene = load_scene(scene_dir)
+    facts = read_sim_facts(scene_dir) or {}
+    theta = true_thresholds(scene_dir, scene.events.cfa)
+    on, off = (float(np.mean(theta.theta_pos)), float(np.mean(theta.theta_neg))) if theta is not None \
+        else (float("nan"), float("nan"))
+    return {"preset": facts.get("preset", "?"), "cfa": scene.events.cfa or "grey", "theta": [on, off],
+            "events": len(scene.events), "motion": facts.get("motion_scale"),
+            "sensor": {k: facts.get(k) for k in ("theta_sigma", "refractory_s", "ba_rate_hz", "hot_pixels")}}
+
+
+def format_table(rows: list[dict]) -> str:
+    head = (f"{'scene':<11}{'preset':<10}{'cfa':<6}{'motion':>7}{'θ on/off':>12}{'events':>10}{'floor':>8}"
+            f"{'affine PSNR':>13}{'SSIM':>7}{'ΔE00':>7}{'raw':>7}{'vs floor':>10}{'train s':>9}")
+    lines = [head]
+    for r in rows:
+        d = r["row"]
+        de = d["delta_e00"] if d["delta_e00"] is not None else float("nan")
+        lines.append(f"{r['scene']:<11}{r['preset']:<10}{r['cfa']:<6}{r['motion'] or float('nan'):>7.2f}"
+                     f"{r['theta'][0]:>6.2f}/{r['theta'][1]:<5.2f}{r['events']:>10}{r['floor']['psnr']:>8.2f}"
+                     f"{d['affine_psnr']:>13.2f}{d['affine_ssim']:>7.3f}{de:>7.2f}{d['raw_psnr']:>7.2f}"
+                     f"{d['affine_psnr'] - r['floor']['psnr']:>+10.2f}{d['train_seconds']:>9.0f}")
+    psnr = np.array([r["row"]["affine_psnr"] for r in rows])
+    gap = psnr - np.array([r["floor"]["psnr"] for r in rows])
+    def met(ok: bool) -> str:
+        return "met" if ok else "NOT met"
+
+    lines.append(f"mean of {len(rows)}: affine PSNR {psnr.mean():.2f} dB (target >= 23: "
+                 f"{met(psnr.mean() >= 23)}), lowest {psnr.min():.2f} (target >= 20: "
+                 f"{met(psnr.min() >= 20)}), over the floor "
+                 f"{gap.mean():+.2f} on the mean, lowest {gap.min():+.2f} (target every scene >= +6: "
+                 f"{met(gap.min() >= 6)})")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--split", choices=("tuning", "test"), default="test")
+    ap.add_argument("--seeds", default="1000-1007", help="e.g. 1000-1007 or 0,1,2")
+    ap.add_argument("--root", default="bench_out/event_only_sweep", help="scenes and runs are kept here")
+    ap.add_argument("--size", default="96x72")
+    ap.add_argument("--duration", type=float, default=None, help="seconds of events (default: the sweep's)")
+    ap.add_argument("--config", default="event_only")
+    ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("overrides", nargs="*")
+    args = ap.parse_args(argv)
+    root = Path(args.root)
+    rows = []
+    for seed in parse_seeds(args.seeds):
+        scene = make_scene(root, args.split, seed, args.size, args.duration)
+        tag = f"{args.split}_{seed}"
+        row = {"scene": tag, **describe(scene), "floor": hpf_floor(scene),
+               "row": run_scene(scene, root / "runs" / tag, args.config, list(args.overrides))}
+        rows.append(row)
+        print(json.dumps({"scene": tag, "affine_psnr": round(row["row"]["affine_psnr"], 2),
+                          "floor": round(row["floor"]["psnr"], 2)}), flush=True)
+    print(format_table(rows))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
