@@ -1,4 +1,8 @@
-"""``fusiongs render OUT --t ...``: sharp images at any instants from a finished run."""
+"""``fusiongs render OUT --t ...``: sharp images at any instants from a finished run.
+
+These are the model's renders: the exposure-ratio correction of ``fusiongs deblur``'s deblurred
+frames needs the scene's frames and is not applied here (docs/method.md).
+"""
 
 from __future__ import annotations
 
