@@ -67,7 +67,8 @@ def containing_frame(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) 
 
 @torch.no_grad()
 def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.Tensor, n_samples: int,
-                      eps: float, grey_weights: tuple[float, float, float], backend: str = "auto"
+                      eps: float, grey_weights: tuple[float, float, float], backend: str = "auto",
+                      colour: tuple[np.ndarray, np.ndarray] | None = None
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sharp linear renders at ``times``, as rendered and exposure-ratio corrected.
 
@@ -82,6 +83,9 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         n_samples: renders per exposure for the predicted blurry frame (the training's).
         eps: the ratio's linear offset (``output.ratio_eps``).
         grey_weights: ``w`` of a monochrome frame ``w · L``; its ratio scales all three channels.
+        colour: ``(gain [3], offset [3])`` applied to every render (linear) before the ratio is
+            taken (the one-frame colour anchor, :mod:`fusiongs.eval.colour_anchor`); the corrected
+            renders then carry it, the rendered ones do not.
 
     Returns:
         ``(rendered, corrected, frame)``: ``[T, H, W, 3]`` float32 linear radiance (not clipped),
@@ -104,7 +108,11 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
             continue
         t = torch.cat([exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples),
                        torch.as_tensor(times[at])])
-        lin, _, _ = state.render(scene.camera, t.to(device), backend)
+        raw, _, _ = state.render(scene.camera, t.to(device), backend)
+        lin = raw
+        if colour is not None:  # as the anchor was fitted and is applied: on renders clipped to [0, 1]
+            gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(device) for v in colour)
+            lin = raw.clamp(0, 1) * gain + offset
         predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
         encoded = np.asarray(fs.images[i], np.float32)
         image = torch.as_tensor(encoded).to(device)
@@ -113,7 +121,7 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         if observed.shape[-1] == 1:
             predicted = to_grey(predicted, grey_weights)
         ratio = exposure_ratio(observed, predicted, image >= SATURATED, eps)
-        rendered[at] = lin[n_samples:].cpu().numpy()
+        rendered[at] = raw[n_samples:].cpu().numpy()
         corrected[at] = (lin[n_samples:] * ratio).cpu().numpy()
     return rendered, corrected, frame
 

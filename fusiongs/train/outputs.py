@@ -118,20 +118,22 @@ def write_trajectory(tr: Trained, scene: Scene, path: Path) -> PoseSamples:
 
 def write_outputs(tr: Trained, scene: Scene, out: Path,
                   adjust: Callable[[np.ndarray], np.ndarray] | None = None,
-                  kept: np.ndarray | None = None
+                  kept: np.ndarray | None = None, colour: tuple[np.ndarray, np.ndarray] | None = None
                   ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray]]:
     """Write renders, deblurred frames and video, model, config, thresholds and the refined
     camera path (``trajectory.txt``).
 
     The deblurred frames are the renders at the frames' mid-exposure; with ``output.exposure_ratio``
     on, they and every requested render inside a frame's exposure are exposure-ratio corrected
-    (:mod:`fusiongs.train.exposure_ratio`: their colours then come from the frame itself, so
-    ``adjust`` is not applied to them).
+    (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the renders with ``colour``
+    applied, so ``adjust`` is not applied to them again.
 
     Args:
         adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
             :func:`fusiongs.eval.colour_anchor.apply_anchor`); None writes them as rendered.
         kept: the frames of ``scene`` the run was trained on (``--holdout``); None: all of them.
+        colour: the linear ``(gain, offset)`` that ``adjust`` applies (the colour anchor), for the
+            corrected images.
 
     Returns:
         ``(rendered, written, render_only)``: ``{name: sRGB image}`` for every ``renders`` entry
@@ -148,7 +150,8 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     if cfg.output.exposure_ratio and len(scene.frames):
         gains = frame_log_gains(state, len(scene.frames), kept)
         plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
-                                                cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend)
+                                                cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend,
+                                                colour)
         srgb = linear_to_srgb(np.clip(plain, 0, 1)).astype(np.float32)
         fixed = linear_to_srgb(np.clip(fixed, 0, 1)).astype(np.float32)
         corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}

@@ -265,7 +265,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
     unanchored, images, render_only = write_outputs(
         tr, scene, out, functools.partial(apply_anchor, anchor) if anchor.applied else None,
-        kept if held.size else None)
+        kept if held.size else None, (anchor.gain, anchor.offset) if anchor.applied else None)
     if anchor.applied:
         log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
     n_it = max(tr.iteration, 1)

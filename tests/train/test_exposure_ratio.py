@@ -117,3 +117,19 @@ def test_frame_log_gains_fill_held_out_frames_with_the_mean_gain():
     g = frame_log_gains(state, 3, kept=np.array([0, 2]))
     np.testing.assert_allclose(g.exp().numpy(), [1.0, 2.5, 4.0], rtol=1e-6)
     assert frame_log_gains(state, 2) is not None and torch.equal(frame_log_gains(state, 2), state.log_gain)
+
+
+def test_the_colour_anchor_is_applied_before_the_ratio():
+    """With a colour transform (the one-frame anchor) a frame that matches the anchored renders
+    leaves them as anchored; the returned plain renders stay raw."""
+    state = MovingPattern(1)
+    gain, offset = np.array([1.5, 0.9, 0.7]), np.array([0.01, 0.0, 0.02])
+    s, e = 0.0, 0.04
+    anchored = [state.image(float(t)).clamp(0, 1) * torch.tensor(gain, dtype=torch.float32)
+                + torch.tensor(offset, dtype=torch.float32) for t in exposure_instants(s, e, N)]
+    frame = linear_to_response(torch.stack(anchored).mean(0).numpy().astype(np.float64), "srgb")
+    plain, fixed, _ = corrected_renders(state, _scene([frame], [s], [e]), [0.02], state.log_gain, N, 1e-3,
+                                        GREY, colour=(gain, offset))
+    raw = state.image(0.02).numpy()
+    np.testing.assert_allclose(plain[0], raw, atol=1e-6)
+    np.testing.assert_allclose(fixed[0], np.clip(raw, 0, 1) * gain + offset, rtol=1e-4, atol=1e-5)
