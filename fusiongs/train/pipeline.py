@@ -173,6 +173,7 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
     from fusiongs.eval.metrics import psnr
     from fusiongs.frames.response import linear_to_response, response_to_linear
     from fusiongs.losses.blur import exposure_instants
+    from fusiongs.train.exposure_ratio import frame_log_gains
     from fusiongs.train.step import predict_blurry
 
     fs, cfg, state = scene.frames, tr.config, tr.state
@@ -184,10 +185,8 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
 
         theta = estimate_thresholds(frame_subset(fs, kept), events)
     device = state.model.means.device
-    with torch.no_grad():
-        gains = state.log_gain.detach().exp()
-        gain = float(gains.mean()) if gains.numel() else 1.0
-    log_g = torch.tensor(np.log(gain), dtype=torch.float32, device=device)
+    log_g = frame_log_gains(state, len(fs), kept)[int(held[0])]  # held-out frames: the mean gain
+    gain = float(log_g.exp())
 
     def display(encoded: np.ndarray) -> np.ndarray:
         out = linear_to_srgb(np.clip(response_to_linear(np.asarray(encoded, np.float64), fs.response), 0, 1))
