@@ -288,18 +288,29 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         data = prepare_channel(sens, counts, between, sel, bad_near, frame_ok, events.width, opts.tile,
                                opts.max_gap, neigh)
         near_gate = bad_near is not bad_pair
+        gate = "neighbours" if near_gate else ("pixel" if gap > 0 else "off")
         if near_gate:
             own = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
                                   opts.max_gap, neigh)
             if int(data.valid.sum()) < opts.refractory_keep * int(own.valid.sum()):
-                data, near_gate = own, False
+                data, near_gate, gate = own, False, "pixel"
+        if gap > 0 and int(data.valid.sum()) < opts.min_pixels:
+            # Every pixel's events come closer than the gap: no refractory floor can be told from
+            # the signal's own intervals, so the gate would leave nothing to fit.
+            data = prepare_channel(sens, counts, between, sel, np.zeros_like(bad_pair), frame_ok,
+                                   events.width, opts.tile, opts.max_gap, neigh)
+            near_gate, gate = False, "off (it left no pixel pairs)"
+        if int(data.valid.sum()) < opts.min_pixels:
+            raise InputError("calibrate", "frames", f"at least {opts.min_pixels} usable pixel pairs "
+                             f"of channel {names[c]} between the frames (neither saturated nor dark)",
+                             f"{int(data.valid.sum())}")
         res = search_both(data, opts, rng)
         out_p.append(res["theta_pos"])
         out_n.append(res["theta_neg"])
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
-                                            "count_units")} | {"neighbour_gate": near_gate})
+                                            "count_units")} | {"neighbour_gate": near_gate, "refractory_gate": gate})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     tp, sp = np.array(out_p), np.array(sd_p)

@@ -219,9 +219,25 @@ def _iv_sums(data: PairData, per_pix: torch.Tensor) -> torch.Tensor:
     return out
 
 
-def _solve_iv(sums: torch.Tensor) -> tuple[float, float]:
-    sol = torch.linalg.solve(sums[..., :-1], sums[..., -1])
-    return float(sol[..., 0]), float(sol[..., 1])
+def _identified(sums: torch.Tensor) -> torch.Tensor:
+    """Indices of the regressors the data identify: an indicator regressor that is constant over
+    the kept pixel pairs (every pixel fired in every pair, as on a busy sensor) centres to zero, and
+    so do its row and column of the normal equations; it is left out rather than made singular."""
+    d = torch.diagonal(sums[..., :-1], dim1=-2, dim2=-1).abs()
+    d = d.reshape(-1, d.shape[-1]).amax(0)
+    keep = d > 1e-9 * float(d[:2].max().clamp_min(1e-300))
+    keep[:2] = True  # the thresholds themselves are never dropped
+    return torch.nonzero(keep).reshape(-1)
+
+
+def _solve_iv(sums: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """Solve the IV normal equations ``[..., K, K + 1]`` over the regressors ``idx``;
+    ``[..., 2]`` (theta_+, theta_-), NaN where the system is singular."""
+    a = sums[..., idx[:, None], idx]
+    b = sums[..., idx, -1]
+    sol, info = torch.linalg.solve_ex(a, b)
+    bad = (info != 0)[..., None]
+    return torch.where(bad, torch.full_like(sol[..., :2], float("nan")), sol[..., :2])
 
 
 def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOptions,
@@ -246,7 +262,8 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     sums = None
     for _ in range(iters):
         sums = _iv_sums(data, _iv_pixel_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets))
-        new = _solve_iv(sums.sum(0))
+        idx = _identified(sums.sum(0))
+        new = tuple(float(v) for v in _solve_iv(sums.sum(0), idx))
         if not (np.isfinite(new[0]) and np.isfinite(new[1]) and new[0] > 0 and new[1] > 0):
             return {"theta_pos": start[0], "theta_neg": start[1], "std_pos": float("nan"),
                     "std_neg": float("nan"), "iv": "failed (no positive solution)"}
@@ -256,7 +273,7 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     if opts.bootstrap > 0 and t >= 4:
         w = torch.as_tensor(rng.multinomial(t, np.full(t, 1.0 / t), size=opts.bootstrap), dtype=torch.float64)
         boot = torch.einsum("bt,tij->bij", w, sums)
-        sol = torch.linalg.solve(boot[..., :-1], boot[..., -1])[:, :2]
+        sol = _solve_iv(boot, idx)
         ok = torch.isfinite(sol).all(1) & (sol > 0).all(1)
         std_p, std_n = (float(v) for v in sol[ok].std(0)) if ok.sum() > 2 else (std_p, std_n)
     return {"theta_pos": tp, "theta_neg": tn, "std_pos": std_p, "std_neg": std_n,

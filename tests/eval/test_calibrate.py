@@ -262,3 +262,35 @@ def test_cli_bad_input_is_one_line_exit_2(grey_asym, tmp_path, capsys):
     captured = capsys.readouterr()
     assert "common scale" in captured.err
     assert not read_calibration(tmp_path / "n.json")[0].scale_known
+
+
+def test_a_busy_sensor_where_every_pixel_fires_in_every_pair_calibrates(tmp_path, capsys):
+    """Dense events (every pixel fires ON and OFF between every two frames) leave the IV fit's
+    indicator regressors constant: they are dropped instead of making the system singular (a
+    1e8-event 1280x720 scene raised torch's LinAlgError), and the thresholds come out right."""
+    from fusiongs.sim.plane_wave import PlaneWave, write_plane_wave_scene
+
+    pw = PlaneWave(events=600_000, width=64, height=48, duration=3.0, frames=6, exposure=0.02)
+    write_plane_wave_scene(pw, tmp_path / "busy")
+    assert main(["calibrate", str(tmp_path / "busy"), "-o", str(tmp_path / "c.json"), "--json"]) == 0
+    th = json.loads(capsys.readouterr().out)["thresholds"]
+    for v in th["theta_pos"] + th["theta_neg"]:
+        assert abs(v / pw.theta - 1) < 0.1
+
+
+def test_a_gate_that_would_leave_no_pixel_pairs_is_switched_off(tmp_path):
+    """One amplitude everywhere: every pixel's intervals share a floor that reads as a dead time,
+    and twice it covers all of them. The gate then left nothing and the estimate fell silently to
+    the search's lower bound (0.03 for 0.2); now the gate is switched off and says so."""
+    from fusiongs.io.scene_io import load_scene
+    from fusiongs.sim.plane_wave import PlaneWave, write_plane_wave_scene
+
+    pw = PlaneWave(events=600_000, width=64, height=48, duration=3.0, frames=6, exposure=0.02,
+                   amplitude_spread=0.0)
+    write_plane_wave_scene(pw, tmp_path / "regular")
+    scene = load_scene(tmp_path / "regular")
+    est = estimate_thresholds(scene.frames, scene.events)
+    assert est.details["dead_time_us"] > 0
+    assert est.details["per_channel"][0]["refractory_gate"].startswith("off")
+    for v in (*est.theta_pos, *est.theta_neg):
+        assert abs(v / pw.theta - 1) < 0.1
