@@ -65,7 +65,9 @@ def run(args: argparse.Namespace) -> int:
         if aps is not None and len(aps):
             starts.append(int((aps.exposure_start if aps.exposure_start is not None else aps.t).min()))
         origin = min(starts)
-        ev = EventStream(ev.t - origin, ev.x, ev.y, ev.p, ev.width, ev.height, ev.cfa)
+        t = ev.t if ev.t.flags.writeable and ev.t.flags.owndata else ev.t.copy()
+        t -= origin  # in place: the stream was just read, and a copy is 8 bytes an event
+        ev = EventStream(t, ev.x, ev.y, ev.p, ev.width, ev.height, ev.cfa)
     w, h = ev.width, ev.height
     if args.fx is None:
         print(f"fusiongs convert: warning: no intrinsics given; using fx=fy={w}, cx={w / 2:g}, "

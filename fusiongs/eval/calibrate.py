@@ -256,8 +256,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     f = len(frames)
     ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
     mids = 0.5 * (ts + te)
-    counts = [event_count_samples(events, float(a), float(b), opts.n_samples).reshape(opts.n_samples, 2, -1)
-              for a, b in zip(ts, te)]
+    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples)
+                       .reshape(opts.n_samples, 2, -1)) for a, b in zip(ts, te)]
     between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)))
                         .reshape(2, -1) for i in range(f - 1)])
     dead = dead_time_us(events, opts.dead_time_jump)
@@ -321,6 +321,13 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         tn, sn = shrink_channels(tn, sn, opts.channel_prior)
     return SensorThresholds(names, tp, tn, sp, sn, True,
                             f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
+
+
+def _compact(counts: np.ndarray) -> np.ndarray:
+    """int16 when every count fits (half the memory of a 1280x720 sensor's [M, 2, H*W] counts)."""
+    if counts.size and int(np.abs(counts).max()) < np.iinfo(np.int16).max:
+        return counts.astype(np.int16)
+    return counts
 
 
 def shrink_channels(theta: np.ndarray, std: np.ndarray, prior: float) -> tuple[np.ndarray, np.ndarray]:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from fusiongs.errors import InputError
+from fusiongs.events._kernels import exposure_counts
 from fusiongs.events.cfa import cfa_channel_index, demosaic
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds
@@ -69,8 +70,9 @@ def event_count_samples(events: EventStream, t_start: float, t_end: float, n_sam
 
     Returns:
         ``[M, 2, H, W]`` int32 ``N_pm(t_k) - N_pm(t_mid)`` (channel 0 ON, 1 OFF): negative before
-        mid-exposure, positive after. One sort-free pass: a bincount over (sample bin, polarity,
-        pixel) and a cumulative sum over the bins.
+        mid-exposure, positive after. One sort-free pass over the exposure's events
+        (:func:`fusiongs.events._kernels.exposure_counts`; the bincount form is
+        :func:`fusiongs.events._reference.exposure_counts`).
     """
     if not (np.isfinite(t_start) and np.isfinite(t_end) and t_end > t_start):
         raise InputError("edi", "t_start/t_end", "an exposure window with t_end > t_start",
@@ -81,15 +83,11 @@ def event_count_samples(events: EventStream, t_start: float, t_end: float, n_sam
     ts = s_us + (np.arange(n_samples) + 0.5) / n_samples * (e_us - s_us)
     mid = 0.5 * (s_us + e_us)
     i0, i1 = events.index_range(int(np.floor(s_us)), int(np.ceil(e_us)) + 1)
-    t = events.t[i0:i1]
     hw = events.height * events.width
-    pix = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
-    pix += (events.p[i0:i1] < 0) * hw
-    b = np.searchsorted(ts, t, side="right")  # the event counts for samples k >= b
-    hist = np.bincount(b * (2 * hw) + pix, minlength=(n_samples + 1) * 2 * hw)
-    cum = np.cumsum(hist.reshape(n_samples + 1, 2 * hw)[:n_samples], axis=0)
-    at_mid = np.bincount(pix[t < mid], minlength=2 * hw)
-    return (cum - at_mid).astype(np.int32).reshape(n_samples, 2, events.height, events.width)
+    out = np.zeros((n_samples, 2 * hw), np.int32)
+    exposure_counts(events.t[i0:i1], events.x[i0:i1], events.y[i0:i1], events.p[i0:i1], events.width,
+                    hw, ts, mid, out)
+    return out.reshape(n_samples, 2, events.height, events.width)
 
 
 def edi_ratio(counts: np.ndarray, theta, cfa: str | None) -> np.ndarray:
@@ -99,8 +97,10 @@ def edi_ratio(counts: np.ndarray, theta, cfa: str | None) -> np.ndarray:
         ``[H, W, 1]`` float64 for grey events, ``[H, W, 3]`` (bilinear-demosaiced) for a CFA.
     """
     tp, tn = threshold_maps(theta, cfa, counts.shape[-2], counts.shape[-1])
-    e = tp * counts[:, 0].astype(np.float64) - tn * counts[:, 1]
-    r = np.exp(e).mean(axis=0)
+    r = np.zeros(counts.shape[-2:], np.float64)
+    for c in counts:  # one sample at a time: [H, W] temporaries, not [M, H, W]
+        r += np.exp(tp * c[0] - tn * c[1])
+    r /= counts.shape[0]
     if cfa is None:
         return r[..., None]
     return np.asarray(demosaic(r, cfa, "bilinear"), dtype=np.float64)

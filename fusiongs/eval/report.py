@@ -22,6 +22,13 @@ def _to_u8(img: np.ndarray) -> np.ndarray:
     return np.round(np.clip(a, 0, 1) * 255).astype(np.uint8)
 
 
+def _shrink(img: np.ndarray, max_width: int) -> np.ndarray:
+    h, w = img.shape[:2]
+    if w <= max_width:
+        return img
+    return cv2.resize(img, (max_width, max(1, round(h * max_width / w))), interpolation=cv2.INTER_AREA)
+
+
 def _label(img: np.ndarray, text: str, scale: float = 0.4) -> np.ndarray:
     """Put ``text`` on a white band above an RGB uint8 image."""
     band = np.full((16, img.shape[1], 3), 255, np.uint8)
@@ -30,9 +37,11 @@ def _label(img: np.ndarray, text: str, scale: float = 0.4) -> np.ndarray:
     return np.concatenate([band, img], axis=0)
 
 
-def picture_strip(columns: Mapping[str, np.ndarray]) -> np.ndarray:
-    """Images ``[H, W, C]`` in [0, 1] side by side, each under its name; RGB uint8."""
-    tiles = [_label(_to_u8(img), name) for name, img in columns.items()]
+def picture_strip(columns: Mapping[str, np.ndarray], max_width: int = 480) -> np.ndarray:
+    """Images ``[H, W, C]`` in [0, 1] side by side, each under its name; RGB uint8. Images wider
+    than ``max_width`` are shrunk (area averaging) to it: the report is an overview, the outputs
+    keep every pixel (an HD sensor's strips were 15 megapixels)."""
+    tiles = [_label(_shrink(_to_u8(img), max_width), name) for name, img in columns.items()]
     h = max(t.shape[0] for t in tiles)
     tiles = [np.pad(t, ((0, h - t.shape[0]), (0, 4), (0, 0)), constant_values=255) for t in tiles]
     return np.concatenate(tiles, axis=1)
@@ -176,4 +185,4 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
         strips.append(picture_strip({f"{c} {name}" if i == 0 else c: img
                                      for i, (c, img) in enumerate(cols.items())}))
     parts = ([table_image(rows, 520)] if rows else []) + [side_by_side([loss, theta])] + strips
-    write_png(path, stack_rows(parts).astype(np.float32) / 255.0)
+    write_png(path, stack_rows(parts))

@@ -24,10 +24,32 @@ def time_gaps(t: np.ndarray, factor: float = 10.0,
     """
     if t.size < 2:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), int(min_gap_us)
-    dt = np.diff(t)
-    thr = int(max(factor * float(np.median(dt)), min_gap_us))
-    i = np.flatnonzero(dt > thr)
-    return t[i], dt[i], thr
+    thr = int(max(factor * _median_interval(t), min_gap_us))
+    starts, lengths = [], []
+    for a in range(0, t.size - 1, CHUNK):  # in chunks: no [E] temporaries (1e8 events: 0.8 GB each)
+        dt = np.diff(t[a:a + CHUNK + 1])
+        i = np.flatnonzero(dt > thr)
+        starts.append(t[a + i])
+        lengths.append(dt[i])
+    return np.concatenate(starts), np.concatenate(lengths), thr
+
+
+CHUNK = 1 << 22
+
+
+def _median_interval(t: np.ndarray, cap: int = 1 << 16) -> float:
+    """``np.median(np.diff(t))`` of sorted int64 ``t`` from a histogram of the intervals (exact
+    while the median is below ``cap`` µs; a sparser stream is small enough to diff whole)."""
+    n = t.size - 1
+    hist = np.zeros(cap + 1, np.int64)
+    for a in range(0, n, CHUNK):
+        hist += np.bincount(np.minimum(np.diff(t[a:a + CHUNK + 1]), cap), minlength=cap + 1)
+    cum = np.cumsum(hist)
+    lo = int(np.searchsorted(cum, (n - 1) // 2, side="right"))  # the two middle order statistics
+    hi = int(np.searchsorted(cum, n // 2, side="right"))
+    if hi >= cap:
+        return float(np.median(np.diff(t)))
+    return 0.5 * (lo + hi)
 
 
 def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
@@ -35,13 +57,13 @@ def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
     less than ``gap_us`` µs (either polarity). With a refractory period, such events mark pixels
     whose log intensity changed faster than the sensor could report: their counts are lower bounds.
     """
+    from fusiongs.events._kernels import fast_mask
+
     fast = np.zeros(len(events), bool)
     if gap_us <= 0 or len(events) < 2:
         return fast
-    pix = events.y.astype(np.int64) * events.width + events.x
-    order = np.argsort(pix, kind="stable")  # time order kept within each pixel
-    ps, ts = pix[order], events.t[order]
-    fast[order[1:]] = (ps[1:] == ps[:-1]) & ((ts[1:] - ts[:-1]) < gap_us)
+    fast_mask(events.t, events.x, events.y, events.width, events.height * events.width,
+              float(gap_us), fast)
     return fast
 
 
@@ -134,21 +156,21 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -
     the smooth rise of a real DAVIS346's intervals (pixel bandwidth: none under 100 µs, then 2-6x
     more per bin from 1 ms on for several bins) is no step.
     """
+    from fusiongs.events._kernels import interval_histogram
+
     if len(events) < 2:
         return 0.0
-    pix = events.y.astype(np.int64) * events.width + events.x
-    order = np.argsort(pix, kind="stable")
-    ps, ts = pix[order], events.t[order]
-    dt = (ts[1:] - ts[:-1])[ps[1:] == ps[:-1]]
-    if dt.size < 100:
-        return 0.0
     edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
-    h = np.histogram(dt, edges)[0].astype(np.float64)
+    h, n_intervals = interval_histogram(events.t, events.x, events.y, events.width,
+                                        events.height * events.width, edges)
+    if n_intervals < 100:
+        return 0.0
+    h = h.astype(np.float64)
     h = np.concatenate([h, np.zeros(2)])
     for k in range(1, len(h) - 2):
         before = h[max(0, k - 3):k].max()
         step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
-        if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * dt.size
+        if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * n_intervals
                 and h[k + 2] <= plateau * step):
             return float(edges[k])
     return 0.0
@@ -158,15 +180,14 @@ def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) 
     """``[len(edges) - 1, H*W]`` int32 number of events closer than ``gap_us`` to the previous event
     of the same pixel (:func:`fast_event_mask`), per time segment
     ``[edges[j], edges[j+1])``."""
+    from fusiongs.events._kernels import fast_counts
+
     hw = events.height * events.width
     out = np.zeros((len(edges_us) - 1, hw), np.int32)
-    fast = fast_event_mask(events, gap_us)
-    if not fast.any():
+    if gap_us <= 0 or len(events) < 2 or len(edges_us) < 2:
         return out
-    pix = (events.y.astype(np.int64) * events.width + events.x)[fast]
-    seg = np.searchsorted(edges_us, events.t[fast], side="right") - 1
-    ok = (seg >= 0) & (seg < len(edges_us) - 1)
-    np.add.at(out, (seg[ok], pix[ok]), 1)
+    fast_counts(events.t, events.x, events.y, events.width, hw, float(gap_us),
+                np.asarray(edges_us, np.float64), out)
     return out
 
 

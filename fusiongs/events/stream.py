@@ -134,11 +134,18 @@ class EventStream:
         lo = np.iinfo(np.int64).min if t0_us is None else t0_us
         hi = np.iinfo(np.int64).max if t1_us is None else t1_us
         i0, i1 = self.index_range(lo, hi)
+        return self._counts(i0, i1).astype(np.int32).reshape(2, self.height, self.width)
+
+    def _counts(self, i0: int, i1: int) -> np.ndarray:
+        """``[2 * H * W]`` int64 ON then OFF counts of the events ``[i0, i1)`` (one pass, no
+        per-event temporaries: :func:`fusiongs.events._kernels.count_events`)."""
+        from fusiongs.events._kernels import count_events
+
         hw = self.height * self.width
-        idx = self.y[i0:i1].astype(np.int64) * self.width + self.x[i0:i1]
-        idx += (self.p[i0:i1] < 0) * hw
-        counts = np.bincount(idx, minlength=2 * hw)
-        return counts.astype(np.int32).reshape(2, self.height, self.width)
+        out = np.zeros(2 * hw, np.int64)
+        if i1 > i0:
+            count_events(self.x[i0:i1], self.y[i0:i1], self.p[i0:i1], self.width, hw, out)
+        return out
 
     def signed_count_map(self, t0_us: int | None = None, t1_us: int | None = None) -> np.ndarray:
         """``[H, W]`` int32 sum of polarities (ON minus OFF counts) in ``[t0_us, t1_us)``."""
@@ -147,8 +154,8 @@ class EventStream:
 
     def pixel_counts(self) -> np.ndarray:
         """``[H, W]`` int64 number of events per pixel over the whole stream."""
-        idx = self.y.astype(np.int64) * self.width + self.x
-        return np.bincount(idx, minlength=self.height * self.width).reshape(self.height, self.width)
+        c = self._counts(0, len(self)).reshape(2, self.height, self.width)
+        return c[0] + c[1]
 
     @property
     def duration_us(self) -> int:

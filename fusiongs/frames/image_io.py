@@ -171,21 +171,24 @@ def image_info(path: str | Path, *, verify: bool = True) -> ImageInfo:
 def write_png(path: str | Path, img: np.ndarray, bits: int = 8) -> None:
     """Write ``[H, W, C]`` (C = 1 or 3, RGB) or ``[H, W]`` values in [0, 1] as a PNG, atomically.
 
-    Values are clipped to [0, 1] and rounded to ``bits`` (8 or 16). The file is written next to
-    its destination under a temporary name and then renamed, so readers never see half a file.
+    Values are clipped to [0, 1] and rounded to ``bits`` (8 or 16); a uint8 array is written as it
+    is (8 bits). The file is written next to its destination under a temporary name and then
+    renamed, so readers never see half a file.
     """
     import cv2
 
     path = Path(path)
     if bits not in (8, 16):
         raise InputError(path, "bits", "8 or 16", bits)
-    a = np.asarray(img, dtype=np.float64)
+    raw = isinstance(img, np.ndarray) and img.dtype == np.uint8 and bits == 8
+    a = img if raw else np.asarray(img, dtype=np.float64)
     if a.ndim == 3 and a.shape[2] == 1:
         a = a[:, :, 0]
     if not (a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 3)):
         raise InputError(path, "image", "an array [H, W], [H, W, 1] or [H, W, 3]", a.shape)
     top = 255 if bits == 8 else 65535
-    q = np.rint(np.clip(np.nan_to_num(a), 0.0, 1.0) * top).astype(np.uint8 if bits == 8 else np.uint16)
+    q = a if raw else np.rint(np.clip(np.nan_to_num(a), 0.0, 1.0) * top).astype(
+        np.uint8 if bits == 8 else np.uint16)
     if q.ndim == 3:
         q = np.ascontiguousarray(q[:, :, ::-1])
     ok, buf = cv2.imencode(".png", q)

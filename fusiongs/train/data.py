@@ -51,8 +51,7 @@ class TrainData:
     pvc_times: torch.Tensor | None = None  # [R] float64 s: read-outs of the pvc targets
     pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
     event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
-    fast_t: np.ndarray | None = None  # [E_f] int64 µs of the fast events (censored counts), host
-    fast_index: torch.Tensor | None = None  # [E_f] int64 flat pixel index of the fast events, device
+    fast: torch.Tensor | None = None  # [E] bool: a fast event (censored counts), on the device
 
     _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
 
@@ -95,38 +94,44 @@ class TrainData:
         bounds; None when no fast events were marked.
 
         The neighbours count because an edge faster than the dead time leaves single events on
-        pixels it crosses (no fast pair there) while its neighbours show the pairs."""
-        if self.fast_t is None or self.fast_index is None or self.events is None:
+        pixels it crosses (no fast pair there) while its neighbours show the pairs. The window's
+        fast events are added up on ``event_index``'s device as :meth:`count_maps` adds its events
+        (one byte an event resident; no selection, so no host synchronisation)."""
+        if self.fast is None or self.events is None:
             return None
-        i0, i1 = np.searchsorted(self.fast_t, [int(round(t_a * 1e6)), int(round(t_b * 1e6))])
+        if self.event_index is None:
+            self.event_index = event_indices(self.events, self.fast.device)
+        i0, i1 = self.events.index_range(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
         h, w = self.events.height, self.events.width
-        out = torch.zeros(h * w, dtype=torch.float32, device=self.fast_index.device)
-        out[self.fast_index[int(i0):int(i1)]] = 1.0
-        out = out.reshape(1, 1, h, w)
+        out = torch.zeros(2 * h * w, dtype=torch.float32, device=self.fast.device)
+        out.index_add_(0, self.event_index[i0:i1], self.fast[i0:i1].to(torch.float32))
+        out = (out[:h * w] + out[h * w:]).reshape(1, 1, h, w)
         if radius > 0:
             out = torch.nn.functional.max_pool2d(out, 2 * radius + 1, stride=1, padding=radius)
         return out[0, 0] > 0
 
 
-def fast_events(events: EventStream, gap_us: float, device: torch.device
-                ) -> tuple[np.ndarray, torch.Tensor]:
-    """Times (host, µs) and flat pixel indices (on ``device``) of the events that follow their
-    pixel's previous event by less than ``gap_us``: where the sensor's refractory period may have
-    swallowed events (:func:`~fusiongs.events.stats.fast_event_mask`)."""
+def fast_events(events: EventStream, gap_us: float, device: torch.device) -> torch.Tensor:
+    """``[E]`` bool on ``device``: the event follows its pixel's previous event by less than
+    ``gap_us`` (where the sensor's refractory period may have swallowed events,
+    :func:`~fusiongs.events.stats.fast_event_mask`)."""
     from fusiongs.events.stats import fast_event_mask
 
-    m = fast_event_mask(events, gap_us)
-    flat = events.y[m].astype(np.int64) * events.width + events.x[m]
-    return np.ascontiguousarray(events.t[m], np.int64), torch.from_numpy(flat).to(device)
+    return torch.from_numpy(fast_event_mask(events, gap_us)).to(device)
 
 
 def event_indices(events: EventStream, device: torch.device) -> torch.Tensor:
     """``[E]`` int32 flat index ``p * H * W + y * W + x`` of each event (p = 0 ON, 1 OFF) on
     ``device``: what :meth:`TrainData.count_maps` adds up (the layout of
     :meth:`EventStream.count_maps`)."""
+    from fusiongs.events._kernels import flat_index
+
     hw = events.height * events.width
-    flat = events.y.astype(np.int64) * events.width + events.x + (events.p < 0) * hw
-    return torch.from_numpy(flat.astype(np.int32)).to(device)
+    if 2 * hw > np.iinfo(np.int32).max:
+        raise InputError("events", "width/height", "a sensor of fewer than 2**30 pixels", hw)
+    flat = np.empty(len(events), np.int32)  # one pass, no int64 temporaries (1e8 events: 0.8 GB each)
+    flat_index(events.x, events.y, events.p, events.width, hw, flat)
+    return torch.from_numpy(flat).to(device)
 
 
 def coarse_camera(camera: PinholeCamera, factor: int) -> PinholeCamera:

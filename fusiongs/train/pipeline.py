@@ -256,6 +256,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     if needs_pose_stage(fit_scene):  # no trajectory or no intrinsics: EDI + pycolmap first
         fit_scene, calib = run_pose_stage(fit_scene, cfg, out, calib, resume=resume, log=log)
     tr = train(fit_scene, cfg, out, resume=resume, calibration=calib)
+    tr.data.event_index = tr.data.fast = None  # training's per-event buffers (0.5 GB at 1e8 events)
     scene = dataclasses.replace(fit_scene, frames=scene.frames)  # every frame, the run's camera/poses
     if tr.initial_thresholds is not None:
         write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))

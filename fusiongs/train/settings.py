@@ -40,12 +40,17 @@ class InitSettings:
     stereo_share: float = 0.85       # at most this share of n_points from stereo (the rest random)
     stereo_planes: int = 48          # depth hypotheses of the plane sweep (uniform in 1/z)
     stereo_min_confidence: float = 0.3  # drop pixels whose cost curve is flatter than this
+    stereo_max_width: int = 400      # frames wider than this are block-averaged by the least integer
+                                     # factor that brings them under it before the sweep (0: never)
 
     def __post_init__(self) -> None:
         if not 0 <= self.stereo_share <= 1:
             raise ConfigError("config", "init.stereo_share", "a number in [0, 1]", repr(self.stereo_share))
         if self.stereo_planes < 2:
             raise ConfigError("config", "init.stereo_planes", "an integer >= 2", repr(self.stereo_planes))
+        if self.stereo_max_width < 0:
+            raise ConfigError("config", "init.stereo_max_width", "0 (full resolution) or a width in "
+                              "pixels", repr(self.stereo_max_width))
         if not 0 <= self.stereo_min_confidence < 1:
             raise ConfigError("config", "init.stereo_min_confidence", "a number in [0, 1)",
                               repr(self.stereo_min_confidence))

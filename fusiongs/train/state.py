@@ -12,7 +12,7 @@ from fusiongs.losses.threshold import ContrastThreshold
 from fusiongs.render import rasterize
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.scene.gaussians import GaussianModel
-from fusiongs.train.data import TrainData
+from fusiongs.train.data import TrainData, block_mean, coarse_camera
 from fusiongs.train.settings import DeblurConfig
 
 
@@ -67,6 +67,12 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
 STEREO_FAR_FACTOR = 1000.0  # the far-bound sweep of init.far_from_stereo reaches this x depth_min
 
 
+def stereo_factor(width: int, max_width: int) -> int:
+    """The least integer block size that brings ``width`` to at most ``max_width`` (1 when it is
+    already there, or when ``max_width`` is 0)."""
+    return 1 if max_width <= 0 or width <= max_width else -(-int(width) // int(max_width))
+
+
 def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen: torch.Generator,
                       images: torch.Tensor | None = None) -> tuple[GaussianModel, float]:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
@@ -110,8 +116,13 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     if ini.depth_min <= 0:
         raise ConfigError("config", "init.depth_min", "a depth > 0 for the stereo initialisation "
                           "(its planes are uniform in 1/depth)", repr(ini.depth_min))
+    camera, views = data.camera, images
+    k = stereo_factor(camera.width, ini.stereo_max_width)
+    if k > 1:  # the sweep's cost and memory grow with the pixels; the points it gives do not need them
+        camera, views = coarse_camera(camera, k), block_mean(torch.as_tensor(images), k)
+
     def sweep(far: float) -> tuple[torch.Tensor, torch.Tensor]:
-        xyz, rgb, _ = stereo_points(images, c2w, data.camera, ini.depth_min, far,
+        xyz, rgb, _ = stereo_points(views, c2w, camera, ini.depth_min, far,
                                     n_planes=ini.stereo_planes, min_confidence=ini.stereo_min_confidence)
         return xyz, rgb
 

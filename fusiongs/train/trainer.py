@@ -159,7 +159,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
                                               eo.intensity_tau, cfg.threshold.init, device)
     if cfg.events.censor > 0 and data.events is not None:
-        data.fast_t, data.fast_index = censor_events(data, cfg, theta0, device)
+        data.fast = censor_events(data, cfg, theta0, device)
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
@@ -293,10 +293,10 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
 
 
 def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
-                  device: torch.device) -> tuple[np.ndarray | None, torch.Tensor | None]:
-    """The fast events whose pixels' counts are lower bounds (``events.censor`` times the dead
-    time; the calibration's estimate, else measured here); ``(None, None)`` when the stream shows
-    no refractory floor."""
+                  device: torch.device) -> torch.Tensor | None:
+    """``[E]`` bool: the fast events, whose pixels' counts are lower bounds (``events.censor`` times
+    the dead time; the calibration's estimate, else measured here); None when the stream shows no
+    refractory floor."""
     from fusiongs.events.stats import dead_time_us
     from fusiongs.train.data import fast_events
 
@@ -304,7 +304,7 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     if isinstance(dead, bool) or not isinstance(dead, int | float) or not math.isfinite(dead):
         dead = dead_time_us(data.events)
     if dead <= 0:
-        return None, None
+        return None
     return fast_events(data.events, cfg.events.censor * float(dead), device)
 
 

@@ -247,3 +247,34 @@ def test_the_far_bound_reaches_a_far_wall_from_the_stereo_points():
     far, _, means = init("boxes", True)
     assert far == 12.0  # and then the same Gaussians as without the option
     assert torch.equal(means, init("boxes", False)[2])
+
+
+def test_wide_frames_are_swept_at_a_coarser_resolution_on_the_same_surfaces():
+    """``init.stereo_max_width``: frames wider than it are block-averaged before the sweep (an HD
+    sensor's sweep cost minutes and gigabytes); the points still lie on the true surfaces."""
+    from fusiongs.train.settings import DeblurConfig, InitSettings
+    from fusiongs.train.state import initial_gaussians, stereo_factor
+
+    assert [stereo_factor(w, 400) for w in (173, 346, 400, 401, 1280)] == [1, 1, 1, 2, 4]
+    assert stereo_factor(1280, 0) == 1
+    cam, c2w, caster, images = _preset_views("boxes", w=128, h=96)
+    truth = torch.cat([caster.surface_points(m) for m in c2w]).float()
+
+    class Data:
+        camera = cam
+
+    def stereo_means(max_width):
+        cfg = DeblurConfig(init=InitSettings(method="stereo", n_points=1000, stereo_share=1.0,
+                                             stereo_max_width=max_width, far_from_stereo=False))
+        model, _ = initial_gaussians(Data, torch.as_tensor(c2w).float(), cfg,
+                                     torch.Generator().manual_seed(0), images)
+        coloured = (model.base_colors() - 0.5).abs().amax(1) > 1e-6
+        return model.means.detach()[coloured]
+
+    full, coarse = stereo_means(0), stereo_means(64)
+    assert coarse.shape[0] > 500
+    scale = float(torch.cdist(full, torch.as_tensor(c2w)[:, :3, 3].float()).amin(1).median())
+    for pts in (full, coarse):  # both on the surfaces, to within a few % of the typical depth
+        assert float(torch.cdist(pts, truth).amin(1).median()) < 0.03 * scale
+    with pytest.raises(ConfigError, match="init.stereo_max_width"):
+        InitSettings(stereo_max_width=-1)

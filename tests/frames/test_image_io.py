@@ -85,3 +85,25 @@ def test_raw_errors_name_the_file(tmp_path):
     (tmp_path / "x.dng").write_bytes(b"junk")
     with pytest.raises(InputError, match="x.dng"):
         read_raw(tmp_path / "x.dng")
+
+
+def test_uint8_arrays_are_written_as_they_are(tmp_path):
+    """A uint8 image is encoded without the float detour (the report of an HD run doubled the
+    process's peak memory there) and reads back equal to the float form of the same values."""
+    from fusiongs.frames.image_io import read_image, write_png
+
+    rng = np.random.default_rng(0)
+    u8 = rng.integers(0, 256, (7, 9, 3), dtype=np.uint8)
+    write_png(tmp_path / "u8.png", u8)
+    write_png(tmp_path / "f.png", u8.astype(np.float32) / 255.0)
+    assert (tmp_path / "u8.png").read_bytes() == (tmp_path / "f.png").read_bytes()
+    back = read_image(tmp_path / "u8.png")
+    np.testing.assert_array_equal(np.rint(np.asarray(back) * 255).astype(np.uint8), u8)
+
+
+def test_report_strips_shrink_wide_images_only():
+    from fusiongs.eval.report import picture_strip
+
+    small, wide = np.zeros((130, 173, 3)), np.zeros((720, 1280, 3))
+    assert picture_strip({"a": small, "b": small}).shape == (146, 2 * 177, 3)
+    assert picture_strip({"a": wide}).shape == (16 + 270, 484, 3)

@@ -1,0 +1,65 @@
+"""Plain numpy forms of the one-pass kernels of :mod:`fusiongs.events._kernels`: whole-stream
+index arrays and argsorts, obviously correct and memory-hungry (O(events) temporaries). The
+specification the tests compare the kernels against; nothing else calls them."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fusiongs.events.stream import EventStream
+
+
+def count_maps(events: EventStream, i0: int = 0, i1: int | None = None) -> np.ndarray:
+    """``[2, H, W]`` int64 ON / OFF counts of the events ``[i0, i1)`` (a bincount)."""
+    i1 = len(events) if i1 is None else i1
+    hw = events.height * events.width
+    idx = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
+    idx += (events.p[i0:i1] < 0) * hw
+    return np.bincount(idx, minlength=2 * hw).reshape(2, events.height, events.width)
+
+
+def same_pixel_intervals(events: EventStream) -> tuple[np.ndarray, np.ndarray]:
+    """``(dt, index)``: the interval of every event after its pixel's previous one (µs) and the
+    event's index in the stream, from a stable sort by pixel."""
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")  # time order kept within each pixel
+    ps, ts = pix[order], events.t[order]
+    same = ps[1:] == ps[:-1]
+    return (ts[1:] - ts[:-1])[same], order[1:][same]
+
+
+def interval_histogram(events: EventStream, edges: np.ndarray) -> tuple[np.ndarray, int]:
+    dt, _ = same_pixel_intervals(events)
+    return np.histogram(dt, edges)[0], int(dt.size)
+
+
+def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
+    fast = np.zeros(len(events), bool)
+    dt, idx = same_pixel_intervals(events)
+    fast[idx] = dt < gap_us
+    return fast
+
+
+def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) -> np.ndarray:
+    hw = events.height * events.width
+    out = np.zeros((len(edges_us) - 1, hw), np.int32)
+    fast = fast_event_mask(events, gap_us)
+    pix = (events.y.astype(np.int64) * events.width + events.x)[fast]
+    seg = np.searchsorted(edges_us, events.t[fast], side="right") - 1
+    ok = (seg >= 0) & (seg < len(edges_us) - 1)
+    np.add.at(out, (seg[ok], pix[ok]), 1)
+    return out
+
+
+def exposure_counts(events: EventStream, ts: np.ndarray, mid: float, i0: int, i1: int) -> np.ndarray:
+    """``[M, 2, H, W]`` int32 counts of :func:`fusiongs.eval.edi.event_count_samples`: a bincount
+    over (sample bin, polarity, pixel), a cumulative sum over the bins, less the counts at mid."""
+    t = events.t[i0:i1]
+    hw, m = events.height * events.width, len(ts)
+    pix = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
+    pix += (events.p[i0:i1] < 0) * hw
+    b = np.searchsorted(ts, t, side="right")  # the event counts for samples k >= b
+    hist = np.bincount(b * (2 * hw) + pix, minlength=(m + 1) * 2 * hw)
+    cum = np.cumsum(hist.reshape(m + 1, 2 * hw)[:m], axis=0)
+    at_mid = np.bincount(pix[t < mid], minlength=2 * hw)
+    return (cum - at_mid).astype(np.int32).reshape(m, 2, events.height, events.width)

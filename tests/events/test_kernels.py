@@ -1,0 +1,91 @@
+"""The one-pass event kernels against their numpy specification (fusiongs/events/_reference.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fusiongs.events import _reference as ref
+from fusiongs.events.stats import (
+    _median_interval,
+    dead_time_us,
+    fast_event_counts,
+    fast_event_mask,
+    time_gaps,
+)
+from fusiongs.events.stream import EventStream
+
+
+def _stream(n: int, seed: int, w: int = 7, h: int = 5, span: int = 20_000) -> EventStream:
+    """Random events on a small sensor: many same-pixel pairs, repeated timestamps."""
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.integers(0, span, n)).astype(np.int64)
+    return EventStream(t, rng.integers(0, w, n).astype(np.uint16), rng.integers(0, h, n).astype(np.uint16),
+                       rng.choice(np.array([-1, 1], np.int8), n), w, h)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_count_maps_match_the_bincount(seed):
+    ev = _stream(3000, seed)
+    np.testing.assert_array_equal(ev.count_maps(), ref.count_maps(ev))
+    i0, i1 = ev.index_range(5000, 12000)
+    np.testing.assert_array_equal(ev.count_maps(5000, 12000), ref.count_maps(ev, i0, i1))
+    np.testing.assert_array_equal(ev.pixel_counts(), ref.count_maps(ev).sum(0))
+    assert ev.count_maps(7, 7).sum() == 0
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("gap", [0.5, 1.0, 37.0, 250.5])
+def test_fast_events_match_the_sorted_pixel_intervals(seed, gap):
+    ev = _stream(3000, seed)
+    np.testing.assert_array_equal(fast_event_mask(ev, gap), ref.fast_event_mask(ev, gap))
+    edges = np.array([-5, 0, 3000, 3001, 9000, 15000], np.int64)
+    np.testing.assert_array_equal(fast_event_counts(ev, gap, edges), ref.fast_event_counts(ev, gap, edges))
+
+
+def test_interval_histogram_matches_numpy_and_the_dead_time_is_unchanged():
+    from fusiongs.events._kernels import interval_histogram
+
+    ev = _stream(20000, 3, span=400_000)
+    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
+    h, n = interval_histogram(ev.t, ev.x, ev.y, ev.width, ev.height * ev.width, edges)
+    h_ref, n_ref = ref.interval_histogram(ev, edges)
+    np.testing.assert_array_equal(h, h_ref)
+    assert n == n_ref
+    # the closed last bin of np.histogram: an interval equal to the last edge counts
+    last = EventStream(np.array([0, int(edges[-1])], np.int64), np.zeros(2, np.uint16),
+                       np.zeros(2, np.uint16), np.ones(2, np.int8), 1, 1)
+    h, n = interval_histogram(last.t, last.x, last.y, 1, 1, edges)
+    assert h[-1] == 1 and n == 1
+    assert dead_time_us(ev) == 0.0
+
+
+@pytest.mark.parametrize("n", [2, 3, 10, 1001])
+def test_time_gaps_in_chunks_match_the_whole_diff(n, monkeypatch):
+    import fusiongs.events.stats as stats
+
+    monkeypatch.setattr(stats, "CHUNK", 7)  # many chunks, boundaries everywhere
+    rng = np.random.default_rng(n)
+    t = np.sort(rng.integers(0, 300 * n, n)).astype(np.int64)
+    t[n // 2:] += 2_000_000  # one long gap
+    dt = np.diff(t)
+    assert _median_interval(t) == float(np.median(dt))
+    start, length, thr = time_gaps(t, 10.0, 1000)
+    i = np.flatnonzero(dt > thr)
+    np.testing.assert_array_equal(start, t[i])
+    np.testing.assert_array_equal(length, dt[i])
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("window", [(0.001, 0.009), (0.0, 0.02), (0.0071, 0.0072)])
+def test_exposure_counts_match_the_bincount(seed, window):
+    from fusiongs.eval.edi import event_count_samples
+
+    ev = _stream(4000, seed)
+    s, e = window
+    m = 9
+    s_us, e_us = s * 1e6, e * 1e6
+    ts = s_us + (np.arange(m) + 0.5) / m * (e_us - s_us)
+    i0, i1 = ev.index_range(int(np.floor(s_us)), int(np.ceil(e_us)) + 1)
+    np.testing.assert_array_equal(event_count_samples(ev, s, e, m),
+                                  ref.exposure_counts(ev, ts, 0.5 * (s_us + e_us), i0, i1))
