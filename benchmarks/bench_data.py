@@ -12,6 +12,9 @@ each reader in its own process: best-of-``repeat`` seconds, and the peak residen
 (``ru_maxrss``) above the process's level after its imports, next to the size of the returned
 stream's arrays.
 
+``--verbs [N]`` (default 1e8; only this table) runs every verb that reads a scene on an N-event
+1280x720 scene and prints seconds and peak memory (:mod:`benchmarks.bench_verbs_memory`).
+
 ``--evt3-large [N]`` (default N = 1e8; only this table) writes a synthetic EVT 3.0 file of N events
 chunk by chunk (:func:`write_evt3`, bounded memory) into a temporary folder (``--tmp``, removed
 afterwards), decodes it with fusiongs' reader in a fresh process, and prints the file size, the
@@ -343,7 +346,14 @@ def main() -> None:
     ap.add_argument("--evt3-large", type=float, nargs="?", const=1e8, default=None, metavar="N",
                     help="only the synthetic EVT 3.0 table with N events (default 1e8)")
     ap.add_argument("--tmp", type=Path, default=None, help="folder for the synthetic EVT 3.0 file")
+    ap.add_argument("--verbs", type=float, nargs="?", const=1e8, default=None, metavar="N",
+                    help="only the table of every verb on an N-event 1280x720 scene (time, peak memory; "
+                         "benchmarks/bench_verbs_memory.py, which takes more options)")
     args = ap.parse_args()
+    if args.verbs is not None:  # exec'd: a fresh process, whose children do not inherit this one's
+        script = str(Path(__file__).with_name("bench_verbs_memory.py"))  # high-water mark
+        os.execv(sys.executable, [sys.executable, script, "--events", str(args.verbs)]
+                 + (["--tmp", str(args.tmp)] if args.tmp else []))
     if args.evt3_large is not None:
         evt3_large_table(int(args.evt3_large), args.tmp)
         return

@@ -17,6 +17,7 @@ h5py, the least any verb holding the stream in memory can use. The target is 4 G
 from __future__ import annotations
 
 import argparse
+import ast
 import os
 import shutil
 import subprocess
@@ -24,8 +25,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-
-from fusiongs.sim.plane_wave import PlaneWave, write_plane_wave_scene
 
 TARGET_BYTES = 4e9
 READ_ONLY = ("import sys, h5py\n"
@@ -46,12 +45,17 @@ def run_measured(cmd: list[str], env: dict) -> tuple[int, float, int, str]:
     return proc.returncode, time.perf_counter() - t0, usage.ru_maxrss * 1024, tail
 
 
-def verb_commands(scene: Path, work: Path, iterations: int, pw: PlaneWave) -> dict[str, list[str]]:
+def _rss_now() -> int:
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith("VmRSS:"))
+
+
+def verb_commands(scene: Path, work: Path, iterations: int, width: int, height: int) -> dict[str, list[str]]:
     fg = [sys.executable, "-m", "fusiongs.cli"]
     return {
         "inspect": fg + ["inspect", str(scene)],
         "convert": fg + ["convert", str(scene / "events.h5"), "-o", str(work / "converted"),
-                         "--format", "native", "--width", str(pw.width), "--height", str(pw.height)],
+                         "--format", "native", "--width", str(width), "--height", str(height)],
         "calibrate": fg + ["calibrate", str(scene), "-o", str(work / "calibration.json")],
         "edi": fg + ["edi", str(scene), "-o", str(work / "edi")],
         "deblur": fg + ["deblur", str(scene), "-o", str(work / "run"), "--config", "deblur_fast",
@@ -69,26 +73,35 @@ def main() -> None:
     ap.add_argument("--tmp", type=Path, default=None, help="folder for the scene (needs 14 B/event)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
-    pw = PlaneWave(events=int(a.events), width=w, height=h, duration=a.duration)
+    n_events = int(a.events)
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1]),
            "OMP_WAIT_POLICY": "PASSIVE"}
     folder = Path(a.tmp or tempfile.gettempdir())
-    if shutil.disk_usage(folder).free < 3 * 14 * pw.events:
-        raise SystemExit(f"{folder}: too little free disk for {pw.events:,} events (pass --tmp DIR)")
+    if shutil.disk_usage(folder).free < 3 * 14 * n_events:
+        raise SystemExit(f"{folder}: too little free disk for {n_events:,} events (pass --tmp DIR)")
+    # this process stays small (no fusiongs, numpy or torch imported): Linux counts a parent's
+    # resident memory at the fork in each child's ru_maxrss
+    print(f"this process before the runs: {_rss_now() / 1e9:.3f} GB resident")
     with tempfile.TemporaryDirectory(dir=folder, prefix="bench_verbs_") as d:
         scene, work = Path(d) / "scene", Path(d) / "work"
         work.mkdir()
         t0 = time.perf_counter()
-        info = write_plane_wave_scene(pw, scene)
+        # written by a child: a parent that had held the scene's arrays would hand its high-water
+        # mark on to every child it forks (Linux counts it in the child's ru_maxrss)
+        res = subprocess.run([sys.executable, "-m", "fusiongs.sim.plane_wave", str(scene), "--events",
+                              str(n_events), "--size", a.size, "--duration", str(a.duration)],
+                             env=env, capture_output=True, text=True, check=True)
+        info = ast.literal_eval(res.stdout.strip().splitlines()[-1])
         print(f"plane-wave scene {w}x{h}, {a.duration:g} s, {info['events']:,} events, 10 frames, "
-              f"theta {pw.theta}: written in {time.perf_counter() - t0:.1f} s")
-        rc, s, ref_peak, nbytes = run_measured([sys.executable, "-c", READ_ONLY, str(scene / "events.h5")], env)
+              f"theta {info['theta']}: written in {time.perf_counter() - t0:.1f} s")
+        read_only = [sys.executable, "-c", READ_ONLY, str(scene / "events.h5")]
+        rc, s, ref_peak, nbytes = run_measured(read_only, env)
         arrays = int(nbytes.split()[-1]) if rc == 0 else 0
-        print("| verb | exit | seconds | peak RSS | peak - h5py read of the stream | target 4 GB | last line |\n"
-              "|---|---|---|---|---|---|---|")
+        print("| verb | exit | seconds | peak RSS | peak - h5py read of the stream | target 4 GB "
+              "| last line |\n|---|---|---|---|---|---|---|")
         print(f"| reference: h5py reads the 4 datasets | {rc} | {s:.1f} | {ref_peak / 1e9:.2f} GB | "
               f"(arrays {arrays / 1e9:.2f} GB) | | |")
-        for verb, cmd in verb_commands(scene, work, a.iterations, pw).items():
+        for verb, cmd in verb_commands(scene, work, a.iterations, w, h).items():
             if verb not in a.verbs.split(","):
                 continue
             rc, s, peak, tail = run_measured(cmd, env)

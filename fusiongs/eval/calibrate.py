@@ -310,7 +310,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
-                                            "count_units")} | {"neighbour_gate": near_gate, "refractory_gate": gate})
+                                            "count_units")}
+                   | {"neighbour_gate": near_gate, "refractory_gate": gate})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     tp, sp = np.array(out_p), np.array(sd_p)

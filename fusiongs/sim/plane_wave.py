@@ -158,7 +158,8 @@ def write_plane_wave_scene(s: PlaneWave, out: Path) -> dict:
     # Image shift omega / kx (pixels per second) from a camera moving by v = shift * Z / f.
     speed_px = s.wavelength_x / period_s(s)
     v = speed_px * s.depth / s.focal
-    lines = [f"{t:.6f} {v * t:.9f} 0 0 0 0 0 1" for t in np.linspace(0.0, s.duration, int(s.duration * 100) + 1)]
+    times = np.linspace(0.0, s.duration, int(s.duration * 100) + 1)
+    lines = [f"{t:.6f} {v * t:.9f} 0 0 0 0 0 1" for t in times]
     write_text(out / "trajectory.txt", "# t tx ty tz qx qy qz qw\n" + "\n".join(lines) + "\n")
     doc = {"format": "fusiongs-scene", "version": 1,
            "camera": {"width": s.width, "height": s.height, "fx": s.focal, "fy": s.focal,
@@ -177,7 +178,8 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=10.0)
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
-    print(write_plane_wave_scene(PlaneWave(events=int(a.events), width=w, height=h, duration=a.duration), a.out))
+    pw = PlaneWave(events=int(a.events), width=w, height=h, duration=a.duration)
+    print(write_plane_wave_scene(pw, a.out))
 
 
 if __name__ == "__main__":
