@@ -13,14 +13,18 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _slot(x, y, p, width, hw):  # pragma: no cover - numba
+    """The event's slot in a ``[2 * hw]`` count layout: ``y W + x``, plus ``hw`` for OFF."""
+    k = np.int64(y) * width + np.int64(x)
+    return k + hw if p < 0 else k
+
+
 @njit(cache=True)
 def count_events(x, y, p, width, hw, out):  # pragma: no cover - numba
     """Add every event to ``out`` ``[2 * hw]`` (ON at ``y W + x``, OFF at ``hw + y W + x``)."""
     for i in range(x.shape[0]):
-        k = np.int64(y[i]) * width + np.int64(x[i])
-        if p[i] < 0:
-            k += hw
-        out[k] += 1
+        out[_slot(x[i], y[i], p[i], width, hw)] += 1
 
 
 @njit(cache=True)
@@ -88,9 +92,7 @@ def exposure_counts(t, x, y, p, width, hw, ts, t_mid, out):  # pragma: no cover 
     m = ts.shape[0]
     at_mid = np.zeros(out.shape[1], out.dtype)
     for i in range(t.shape[0]):
-        k = np.int64(y[i]) * width + np.int64(x[i])
-        if p[i] < 0:
-            k += hw
+        k = _slot(x[i], y[i], p[i], width, hw)
         b = np.searchsorted(ts, t[i], side="right")  # the event counts for samples >= b
         if b < m:
             out[b, k] += 1
@@ -106,7 +108,4 @@ def exposure_counts(t, x, y, p, width, hw, ts, t_mid, out):  # pragma: no cover 
 def flat_index(x, y, p, width, hw, out):  # pragma: no cover - numba
     """``out[i]`` = ``y W + x`` of event ``i``, plus ``hw`` for an OFF event (``out`` int32)."""
     for i in range(x.shape[0]):
-        k = np.int64(y[i]) * width + np.int64(x[i])
-        if p[i] < 0:
-            k += hw
-        out[i] = k
+        out[i] = _slot(x[i], y[i], p[i], width, hw)
