@@ -262,8 +262,9 @@ def iv_thresholds(data: PairData, start: tuple[float, float], opts: CalibrateOpt
     sums = None
     for _ in range(iters):
         sums = _iv_sums(data, _iv_pixel_sums(data, log_sharp(data, tp, tn), keep, opts.iv_offsets))
-        idx = _identified(sums.sum(0))
-        new = tuple(float(v) for v in _solve_iv(sums.sum(0), idx))
+        total = sums.sum(0)
+        idx = _identified(total)
+        new = tuple(float(v) for v in _solve_iv(total, idx))
         if not (np.isfinite(new[0]) and np.isfinite(new[1]) and new[0] > 0 and new[1] > 0):
             return {"theta_pos": start[0], "theta_neg": start[1], "std_pos": float("nan"),
                     "std_neg": float("nan"), "iv": "failed (no positive solution)"}

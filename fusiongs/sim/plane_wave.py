@@ -21,11 +21,13 @@ import argparse
 import json
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
 from fusiongs.atomic import atomic_path, write_text
+from fusiongs.errors import InputError
 from fusiongs.frames.image_io import write_png
 from fusiongs.frames.response import linear_to_srgb
 
@@ -53,6 +55,16 @@ class PlaneWave:
     depth: float = 2.0
     focal: float = 1000.0
 
+    def __post_init__(self) -> None:
+        for name in ("events", "width", "height", "frames"):
+            if int(getattr(self, name)) < 1:
+                raise InputError("plane_wave", name, "a positive integer", getattr(self, name))
+        for name in ("duration", "exposure", "theta", "a", "depth", "focal"):
+            if not getattr(self, name) > 0:
+                raise InputError("plane_wave", name, "a positive number", getattr(self, name))
+        if not 0 <= self.amplitude_spread < 1:
+            raise InputError("plane_wave", "amplitude_spread", "a number in [0, 1)", self.amplitude_spread)
+
 
 def amplitude(s: PlaneWave) -> np.ndarray:
     """``[H]`` texture amplitude of every row (log units): ``a (1 + spread sin(2 pi y / 67))``.
@@ -78,6 +90,7 @@ def _crossing(s: PlaneWave, m: int) -> np.ndarray:
     return np.where(np.abs(v) < 1, v, np.nan)
 
 
+@lru_cache(maxsize=4)
 def period_s(s: PlaneWave) -> float:
     """Period ``T`` (s) that puts ``s.events`` events into ``s.duration``."""
     per_row = sum(np.isfinite(_crossing(s, m)).sum() for m in _levels(s))
@@ -85,10 +98,13 @@ def period_s(s: PlaneWave) -> float:
     return s.duration * per_period / s.events
 
 
+@lru_cache(maxsize=4)
 def phase(s: PlaneWave) -> np.ndarray:
     """``[H, W]`` texture phase of every pixel at ``t = 0``."""
     y, x = np.mgrid[0:s.height, 0:s.width].astype(np.float64)
-    return 2 * np.pi * (x / s.wavelength_x + y / s.wavelength_y)
+    ph = 2 * np.pi * (x / s.wavelength_x + y / s.wavelength_y)
+    ph.flags.writeable = False  # cached: shared by every call
+    return ph
 
 
 def one_period(s: PlaneWave) -> tuple[np.ndarray, ...]:
@@ -177,8 +193,16 @@ def main() -> None:
     ap.add_argument("--size", default="1280x720")
     ap.add_argument("--duration", type=float, default=10.0)
     a = ap.parse_args()
-    w, h = (int(v) for v in a.size.split("x"))
-    pw = PlaneWave(events=int(a.events), width=w, height=h, duration=a.duration)
+    try:
+        w, h = (int(v) for v in a.size.lower().split("x"))
+    except ValueError:
+        ap.error(f"--size: expected WIDTHxHEIGHT in pixels, got {a.size!r}")
+    if (a.out / "scene.json").exists():
+        ap.error(f"{a.out}: a scene is already there (scene.json); choose a new folder")
+    try:
+        pw = PlaneWave(events=int(a.events), width=w, height=h, duration=a.duration)
+    except InputError as e:
+        ap.error(str(e))
     print(write_plane_wave_scene(pw, a.out))
 
 

@@ -79,14 +79,24 @@ class TrainData:
         """
         if self.events is None:
             raise RuntimeError("count_maps needs events (TrainData.events is None)")
+        h, w = self.events.height, self.events.width
+        return self._window_sum(t_a, t_b, device).reshape(2, h, w).to(device)
+
+    def _window_sum(self, t_a: float, t_b: float, device: torch.device,
+                    weights: torch.Tensor | None = None) -> torch.Tensor:
+        """``[2 H W]`` float32 sum over the events with ``t_a <= t < t_b`` (seconds) of 1, or of
+        ``weights[i]`` (``[E]``, on ``event_index``'s device), at each event's (polarity, pixel)
+        slot: the window's index range from a binary search of the host timestamps, then an
+        ``index_add`` on ``event_index``'s device (no host copy, no synchronisation)."""
         if self.event_index is None:
             self.event_index = event_indices(self.events, device)
         i0, i1 = self.events.index_range(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
         idx = self.event_index[i0:i1]
+        src = (torch.ones(idx.shape[0], dtype=torch.float32, device=idx.device) if weights is None
+               else weights[i0:i1].to(torch.float32))
         h, w = self.events.height, self.events.width
-        counts = torch.zeros(2 * h * w, dtype=torch.float32, device=idx.device)
-        counts.index_add_(0, idx, torch.ones(idx.shape[0], dtype=torch.float32, device=idx.device))
-        return counts.reshape(2, h, w).to(device)
+        out = torch.zeros(2 * h * w, dtype=torch.float32, device=idx.device)
+        return out.index_add_(0, idx, src)
 
     def censored_map(self, t_a: float, t_b: float, radius: int = 0) -> torch.Tensor | None:
         """``[H, W]`` bool: pixels with a fast event (:func:`fast_events`) in ``[t_a, t_b)``
@@ -95,16 +105,12 @@ class TrainData:
 
         The neighbours count because an edge faster than the dead time leaves single events on
         pixels it crosses (no fast pair there) while its neighbours show the pairs. The window's
-        fast events are added up on ``event_index``'s device as :meth:`count_maps` adds its events
-        (one byte an event resident; no selection, so no host synchronisation)."""
+        fast events are added up as :meth:`count_maps` adds its events (one byte an event
+        resident; no selection, so no host synchronisation)."""
         if self.fast is None or self.events is None:
             return None
-        if self.event_index is None:
-            self.event_index = event_indices(self.events, self.fast.device)
-        i0, i1 = self.events.index_range(int(round(t_a * 1e6)), int(round(t_b * 1e6)))
         h, w = self.events.height, self.events.width
-        out = torch.zeros(2 * h * w, dtype=torch.float32, device=self.fast.device)
-        out.index_add_(0, self.event_index[i0:i1], self.fast[i0:i1].to(torch.float32))
+        out = self._window_sum(t_a, t_b, self.fast.device, self.fast)
         out = (out[:h * w] + out[h * w:]).reshape(1, 1, h, w)
         if radius > 0:
             out = torch.nn.functional.max_pool2d(out, 2 * radius + 1, stride=1, padding=radius)
