@@ -152,7 +152,9 @@ def main(argv: list[str] | None = None) -> int:
     opts = CalibrateOptions()
     for kv in args.option:
         k, v = kv.split("=", 1)
-        opts = type(opts)(**{**opts.__dict__, k: type(getattr(opts, k))(v)})
+        cur = getattr(opts, k)
+        val = v.lower() in ("1", "true", "yes") if isinstance(cur, bool) else type(cur)(v)
+        opts = type(opts)(**{**opts.__dict__, k: val})
     rows = []
     for seed in parse_seeds(args.seeds):
         path = scene_for(root / "scenes", seed, args.split)

@@ -19,17 +19,25 @@ down to -40 %), and fitting in count units instead overshoots. The fit therefore
 variables (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`): the counts of the pixel's
 same-channel neighbours over the same pair see nearly the same log change but carry independent
 noise. Two indicator regressors absorb the part of a threshold that a pixel's reference level had
-already covered at the first frame. A coarse L1 grid search gives the starting point and the
-outlier trimming.
+already covered at the first frame. A coarse L1 grid search gives the starting point.
 
 Why two unknowns: with ``theta_+ != theta_-`` texture that moves back and forth makes the net
 count ``N_+ - N_-`` drift while the log intensity returns to its start; one symmetric threshold can
 only absorb that drift by shrinking (METHOD.md section 4). Gates: refractory losses undercount
-fast edges, so pixels whose events come closer than twice the sensor's dead time (the floor of the
-inter-event interval histogram) are left out of a pair, and so are their neighbours, since an
-edge faster than the dead time leaves a single event where it loses the rest; saturated and near-black pixels
-(quantised, compressed by the log offset of the sensor) are left out; hot pixels are spatial
-outliers of the event count. The uncertainty is a bootstrap over spatial tiles.
+fast edges, so a pixel is left out of a pair when one of its neighbours has two events closer than
+twice the sensor's dead time (the floor of the inter-event interval histogram) inside it: an edge
+that fast loses events at the pixel too, and may leave it a single event, which no interval can
+show. The pixel's own intervals are not used: they scale with its own threshold, so a gate on them
+keeps the pixels with large thresholds (measured on tuning seed 75: +10 to +24 % against -16 to
+-7 % with the neighbours' gate). Saturated and near-black pixels (quantised, compressed by the log
+offset of the sensor) are left out; hot pixels are spatial outliers of the event count. The
+uncertainty is a bootstrap over spatial tiles.
+
+Threshold spread: every fit that adds up pixels' moments weighs a pixel by its event count, i.e.
+by ``1 / theta_p``, and so measures the harmonic mean of the pixels' thresholds, below their mean
+by a factor ``E[theta] E[1 / theta] ~ exp(var log theta)``. The variance is measured from the
+events (:func:`fusiongs.events.stats.threshold_spread`: a pixel's count over its neighbours', in
+the two halves of the recording) and the estimate multiplied by that factor, per polarity.
 
 Without frames only the ON/OFF ratio is observable: over a recording the log intensities a sensor
 sees end about where they started on average over pixels, so ``theta_- / theta_+ = sum N_+ /
@@ -48,7 +56,7 @@ from fusiongs.errors import InputError
 from fusiongs.eval.calibrate_fit import PairData, search_both
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
-from fusiongs.events.stats import dead_time_us, fast_in_spans, spatial_hot_pixels
+from fusiongs.events.stats import dead_time_us, fast_in_spans, spatial_hot_pixels, threshold_spread
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
 from fusiongs.frames.frameset import FrameSet
@@ -73,13 +81,16 @@ class CalibrateOptions:
         hot_factor: a pixel is hot when its event count exceeds ``hot_factor`` times the median
             count of its same-channel neighbours plus ``hot_floor``.
         hot_floor: see ``hot_factor``.
-        refractory_gate: pixels with two events closer than this multiple of the estimated dead
-            time are left out of a pair (0 disables the gate).
-        refractory_radius: a pixel is also left out of a pair when a pixel within this many
-            pixels is (an edge that crosses a pixel within one dead time leaves a single event
-            there, which no interval can show, while its neighbours show the fast pair).
-        refractory_keep: the neighbour gate is used for a channel only when it keeps at least this
-            fraction of the pairs the pixel's own gate keeps (else the pixel's own gate alone).
+        refractory_gate: a pixel is left out of a pair when a pixel within ``refractory_radius``
+            has two events closer than this multiple of the estimated dead time inside it (0
+            disables the gate).
+        refractory_radius: see ``refractory_gate`` (pixels, a square).
+        refractory_self: the pixel's own fast events gate it too (off: they scale with its own
+            threshold, so the gate would select pixels by the quantity being measured).
+        refractory_max_uncertainty: when the fit with the neighbours' gate fails, or its bootstrap
+            uncertainty (relative std of either threshold) exceeds this, the channel is fitted
+            again with the pixel's own gate (a dark scene's events sit on fast edges, and the
+            neighbours' gate may leave pairs without signal). Tuning scenes: at most 0.06.
         dead_time_jump: jump factor of the interval histogram that marks the dead time
             (:func:`fusiongs.events.stats.dead_time_us`).
         channel_prior: expected relative spread of the thresholds between CFA channels; each
@@ -89,7 +100,11 @@ class CalibrateOptions:
         iv_offsets: fit the two indicator offsets in the IV model
             (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`).
         trim: residuals farther than this many robust standard deviations from their pair's
-            median at the starting fit are left out of the IV fit.
+            median at the starting fit are left out of the IV fit (0: none are). Off by default:
+            the starting fit is attenuated by threshold spread, and trimming around it drops the
+            pixels with large thresholds (tuning seed 49: -15 / -19 % trimmed, -4 / -12 % not).
+        spread_correction: multiply each polarity's estimate by ``exp(var log theta)`` measured
+            from the events (the fit measures the harmonic mean of the pixels' thresholds).
         units: residuals in ``"log"`` units, in ``"count"`` units (events), or ``"both"``: the
             geometric mean of the two estimates (:func:`fusiongs.eval.calibrate_fit.search_both`).
         tile: side in pixels of the bootstrap tiles.
@@ -111,13 +126,15 @@ class CalibrateOptions:
     hot_floor: float = 20.0
     refractory_gate: float = 2.0
     refractory_radius: int = 1
-    refractory_keep: float = 0.5
+    refractory_self: bool = False
+    refractory_max_uncertainty: float = 0.1
     dead_time_jump: float = 5.0
     channel_prior: float = 0.05
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
-    trim: float = 5.0
+    trim: float = 0.0
+    spread_correction: bool = True
     tile: int = 16
     bootstrap: int = 200
     unknown_scale: float = 0.25
@@ -217,6 +234,39 @@ def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndar
                     torch.as_tensor(z))
 
 
+def refractory_mask(fast: np.ndarray, height: int, width: int, radius: int, own: bool) -> np.ndarray:
+    """``[F-1, H*W]`` bool pixel pairs left out by the refractory gate, from ``fast`` (``[F-1, H*W]``:
+    the pixel has two events closer than the gap inside the pair): any pixel within ``radius``
+    (a square) is fast, the pixel itself counted only when ``own``."""
+    from scipy.ndimage import maximum_filter
+
+    if radius <= 0:
+        return fast.copy() if own else np.zeros_like(fast)
+    foot = np.ones((1, 2 * radius + 1, 2 * radius + 1), bool)
+    foot[0, radius, radius] = own
+    return maximum_filter(fast.reshape(-1, height, width), footprint=foot,
+                          mode="nearest").reshape(fast.shape)
+
+
+def _unreliable(res: dict, opts: CalibrateOptions) -> bool:
+    """The fit failed, or (with a bootstrap) either threshold's relative std exceeds
+    ``opts.refractory_max_uncertainty`` or is unknown."""
+    if res.get("iv", "").startswith("failed"):
+        return True
+    if opts.bootstrap <= 0:
+        return False
+    rel = [res[f"std_{k}"] / res[f"theta_{k}"] for k in ("pos", "neg")]
+    return not all(np.isfinite(r) and r <= opts.refractory_max_uncertainty for r in rel)
+
+
+def _gate_name(opts: CalibrateOptions, gap: float) -> str:
+    if gap <= 0 or (opts.refractory_radius <= 0 and not opts.refractory_self):
+        return "off"
+    if opts.refractory_radius <= 0:
+        return "pixel"
+    return "pixel and neighbours" if opts.refractory_self else "neighbours"
+
+
 def _check_inputs(frames: FrameSet, events: EventStream) -> None:
     if events is None or len(events) == 0:
         raise InputError("calibrate", "events", "a scene with events (thresholds are measured from them)",
@@ -263,14 +313,9 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     dead = dead_time_us(events, opts.dead_time_jump)
     gap = opts.refractory_gate * dead
     spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
-    bad_pair = fast_in_spans(events, gap, spans)
-    bad_near = bad_pair
-    if opts.refractory_radius > 0 and gap > 0:
-        from scipy.ndimage import maximum_filter
-
-        size = (1, 2 * opts.refractory_radius + 1, 2 * opts.refractory_radius + 1)
-        bad_near = maximum_filter(bad_pair.reshape(-1, events.height, events.width), size=size,
-                                  mode="nearest").reshape(bad_pair.shape)
+    fast = fast_in_spans(events, gap, spans)
+    bad_pair = refractory_mask(fast, events.height, events.width, opts.refractory_radius,
+                               opts.refractory_self)
     sat = np.asarray(lin.max(axis=-1)).reshape(f, -1) >= opts.saturation
     neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
@@ -285,37 +330,46 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                              f"pixels of channel {names[c]} between the frames", f"{sel.size} pixel(s)")
         if sel.size > opts.max_pixels:
             sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
-        data = prepare_channel(sens, counts, between, sel, bad_near, frame_ok, events.width, opts.tile,
+        data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
                                opts.max_gap, neigh)
-        near_gate = bad_near is not bad_pair
-        gate = "neighbours" if near_gate else ("pixel" if gap > 0 else "off")
-        if near_gate:
-            own = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
-                                  opts.max_gap, neigh)
-            if int(data.valid.sum()) < opts.refractory_keep * int(own.valid.sum()):
-                data, near_gate, gate = own, False, "pixel"
-        if gap > 0 and int(data.valid.sum()) < opts.min_pixels:
+        gate = _gate_name(opts, gap)
+        if gate != "off" and int(data.valid.sum()) < opts.min_pixels:
             # Every pixel's events come closer than the gap: no refractory floor can be told from
             # the signal's own intervals, so the gate would leave nothing to fit.
             data = prepare_channel(sens, counts, between, sel, np.zeros_like(bad_pair), frame_ok,
                                    events.width, opts.tile, opts.max_gap, neigh)
-            near_gate, gate = False, "off (it left no pixel pairs)"
+            gate = "off (it left no pixel pairs)"
         if int(data.valid.sum()) < opts.min_pixels:
             raise InputError("calibrate", "frames", f"at least {opts.min_pixels} usable pixel pairs "
                              f"of channel {names[c]} between the frames (neither saturated nor dark)",
                              f"{int(data.valid.sum())}")
         res = search_both(data, opts, rng)
+        if gate == "neighbours" and _unreliable(res, opts):
+            # A dark scene's events sit on fast edges and every pixel near one is gated: what is
+            # left carries too little signal to measure anything, so the pixel's own gate is used.
+            near = {k: res.get(k) for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")}
+            data = prepare_channel(sens, counts, between, sel, fast, frame_ok, events.width,
+                                   opts.tile, opts.max_gap, neigh)
+            res = search_both(data, opts, rng)
+            gate = "pixel (the neighbours' gate left no measurement)"
+            res["neighbour_gate_fit"] = near
         out_p.append(res["theta_pos"])
         out_n.append(res["theta_neg"])
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
                                             "count_units")}
-                   | {"neighbour_gate": near_gate, "refractory_gate": gate})
+                   | {"refractory_gate": gate, "neighbour_gate_fit": res.get("neighbour_gate_fit")})
     details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
                     "n_samples": opts.n_samples})
     tp, sp = np.array(out_p), np.array(sd_p)
     tn, sn = np.array(out_n), np.array(sd_n)
+    if opts.spread_correction:
+        var, n_spread = threshold_spread(events, hot)
+        fac = np.exp(var)
+        tp, sp, tn, sn = tp * fac[0], sp * fac[0], tn * fac[1], sn * fac[1]
+        details["threshold_spread"] = {"log_variance": var.tolist(), "pixels": n_spread.tolist(),
+                                       "factor": fac.tolist()}
     if len(names) > 1 and opts.channel_prior > 0:
         details["per_channel_unpooled"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist()}
         tp, sp = shrink_channels(tp, sp, opts.channel_prior)

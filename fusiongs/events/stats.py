@@ -202,3 +202,62 @@ def fast_in_spans(events: EventStream, gap_us: float, spans: np.ndarray) -> np.n
     a = np.searchsorted(bounds, spans[:, 0])
     b = np.searchsorted(bounds, spans[:, 1])
     return (cum[b] - cum[a]) > 0
+
+
+def _robust_cov(a: np.ndarray, b: np.ndarray) -> float:
+    """``(MAD(a + b)^2 - MAD(a - b)^2) / 4`` with 1.4826 MAD: the covariance of ``a`` and ``b`` for
+    normal data, insensitive to a few outlying pairs."""
+    def mad(v: np.ndarray) -> float:
+        return 1.4826 * float(np.median(np.abs(v - np.median(v))))
+
+    return (mad(a + b) ** 2 - mad(a - b) ** 2) / 4.0
+
+
+def threshold_spread(events: EventStream, hot: np.ndarray, min_count: int = 5,
+                     min_pixels: int = 200) -> tuple[np.ndarray, np.ndarray]:
+    """Per-polarity variance of the pixels' log contrast thresholds ``[2]`` (ON, OFF), and the
+    number of pixels each was measured on ``[2]`` int64.
+
+    A moving camera sweeps nearly the same log signal over neighbouring pixels, so a pixel's count
+    over a stretch of the recording divided by the mean count of its eight same-channel neighbours
+    is about ``theta_neighbours / theta_pixel``: its log varies over pixels by the thresholds'
+    mismatch, plus count noise and the scene's own differences. Taken on the first and on the
+    second half of the recording, the count noise of the two halves is independent, so the
+    covariance over pixels of the two log ratios keeps the mismatch (which both halves share) and
+    drops the noise (robust form: :func:`_robust_cov`). The neighbours' mean carries their own
+    mismatch, ``var / k`` for ``k`` neighbours, which is divided out. Scene differences that both halves share
+    stay in: measured on tuning scenes with a large depth range the estimate's std is ~0.04 above
+    the truth (0.20 for 0.16), elsewhere within ~0.03. Pixels with fewer than ``min_count``
+    events in a half (their own or their neighbours' mean) are left out; a polarity measured on
+    fewer than ``min_pixels`` pixels gets 0 (no correction).
+
+    Args:
+        events: the stream. hot: ``[H*W]`` bool hot pixels (left out, also as neighbours).
+    """
+    from scipy.ndimage import convolve
+
+    h, w = events.height, events.width
+    if len(events) < 2:
+        return np.zeros(2), np.zeros(2, np.int64)
+    step = 1 if events.cfa is None else 2
+    foot = np.zeros((2 * step + 1, 2 * step + 1))
+    foot[::step, ::step] = 1.0
+    foot[step, step] = 0.0
+    ok = ~np.asarray(hot, bool).reshape(h, w)
+    den = np.maximum(convolve(ok.astype(np.float64), foot, mode="mirror"), 1.0)
+    t0, t1 = int(events.t[0]), int(events.t[-1]) + 1
+    mid = t0 + (t1 - t0) // 2
+    ratios, used = [], np.broadcast_to(ok, (2, h, w))
+    for a, b in ((t0, mid), (mid, t1)):
+        c = events.count_maps(a, b).astype(np.float64)  # [2, H, W]
+        m = np.stack([convolve(c[k] * ok, foot, mode="mirror") / den for k in range(2)])
+        good = (c >= min_count) & (m >= min_count)
+        ratios.append(np.log(np.where(good, c, 1.0) / np.where(good, m, 1.0)))
+        used = used & good
+    var, n = np.zeros(2), np.zeros(2, np.int64)
+    for k in range(2):
+        n[k] = int(used[k].sum())
+        if n[k] >= min_pixels:
+            cov = _robust_cov(ratios[0][k][used[k]], ratios[1][k][used[k]])
+            var[k] = max(cov / (1.0 + float(np.mean(1.0 / den[used[k]]))), 0.0)
+    return var, n

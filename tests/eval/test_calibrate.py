@@ -10,7 +10,7 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, shrink_channels
+from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, refractory_mask, shrink_channels
 from fusiongs.events.stats import dead_time_us
 from fusiongs.events.stats import spatial_hot_pixels as hot_pixels
 from fusiongs.events.stream import EventStream
@@ -151,17 +151,44 @@ def test_a_smooth_rise_of_the_intervals_is_no_dead_time():
     assert dead_time_us(ev) == 0.0
 
 
-def test_neighbour_gate_is_used_only_where_it_leaves_enough_pairs(grey_asym):
+def test_the_refractory_gate_looks_at_the_neighbours_not_at_the_pixel():
+    fast = np.zeros((2, 5 * 6), bool)
+    fast[0, 2 * 6 + 3] = True  # one fast pixel in the first pair
+    m = refractory_mask(fast, 5, 6, 1, own=False).reshape(2, 5, 6)
+    assert not m[0, 2, 3]  # its own intervals scale with its own threshold: not used
+    assert m[0, 1:4, 2:5].sum() == 8 and m.sum() == 8  # its eight neighbours are gated
+    both = refractory_mask(fast, 5, 6, 1, own=True).reshape(2, 5, 6)
+    assert both[0, 2, 3] and both.sum() == 9
+    assert np.array_equal(refractory_mask(fast, 5, 6, 0, own=True), fast)
+    assert not refractory_mask(fast, 5, 6, 0, own=False).any()
+
+
+def test_gates_named_in_the_details_and_the_own_gate_when_the_neighbours_leave_no_measurement(grey_asym):
     sc = grey_asym.scene
-    used = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_keep=0.0, bootstrap=0))
+    used = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(bootstrap=50))
     assert used.details["dead_time_us"] > 0
-    assert all(c["neighbour_gate"] for c in used.details["per_channel"])
-    own = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_keep=1.01, bootstrap=0))
-    assert not any(c["neighbour_gate"] for c in own.details["per_channel"])
-    # the neighbours of fast pixels are left out too: fewer pixel pairs in the fit
-    assert used.details["per_channel"][0]["kept"] < own.details["per_channel"][0]["kept"]
+    assert [c["refractory_gate"] for c in used.details["per_channel"]] == ["neighbours"]
+    # An uncertainty no fit can meet: every channel is fitted again with the pixel's own gate,
+    # and the neighbours' fit is kept in the details.
+    own = estimate_thresholds(sc.frames, sc.events,
+                              CalibrateOptions(bootstrap=50, refractory_max_uncertainty=0.0))
+    ch = own.details["per_channel"][0]
+    assert ch["refractory_gate"].startswith("pixel") and ch["neighbour_gate_fit"]["theta_pos"] > 0
+    # the own gate leaves out only the fast pixels, not their neighbours: more pairs in the fit
+    assert ch["kept"] > used.details["per_channel"][0]["kept"]
     off = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_radius=0, bootstrap=0))
-    assert not any(c["neighbour_gate"] for c in off.details["per_channel"])
+    assert [c["refractory_gate"] for c in off.details["per_channel"]] == ["off"]
+
+
+def test_threshold_spread_is_measured_and_undone(grey_asym):
+    sc = grey_asym.scene
+    th = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(bootstrap=0))
+    no = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(bootstrap=0, spread_correction=False))
+    sp = th.details["threshold_spread"]
+    assert all(f >= 1.0 for f in sp["factor"])
+    assert np.allclose(th.theta_pos, no.theta_pos * sp["factor"][0])
+    assert np.allclose(th.theta_neg, no.theta_neg * sp["factor"][1])
+    assert "threshold_spread" not in no.details
 
 
 def test_a_poorly_measured_channel_borrows_from_the_others():
