@@ -115,27 +115,11 @@ def install_max_window(seconds: float) -> None:
 
 
 def hpf_floor(scene_path: Path, theta0: float = 0.22, tau: float = 0.05) -> dict[str, float]:
-    """Affine-fit PSNR / SSIM of the HPF intensity image (the event-only anchor, built as the
-    trainer builds it) at the held-out instants, against the truth."""
-    from fusiongs.eval.metrics import image_metrics
-    from fusiongs.events.cfa import demosaic
-    from fusiongs.events.hpf import high_pass_filter
-    from fusiongs.frames.image_io import read_image
-    from fusiongs.frames.response import linear_to_srgb
-    from fusiongs.io.scene_io import load_scene
+    """Affine-fit PSNR / SSIM of the HPF intensity image (the event-only anchor) at the held-out
+    instants (:func:`fusiongs.eval.event_floor.leaky_integrator_floor`)."""
+    from fusiongs.eval.event_floor import leaky_integrator_floor
 
-    scene = load_scene(scene_path)
-    names = [r.name for r in scene.renders]
-    times = np.array([r.t for r in scene.renders])
-    v = high_pass_filter(scene.events, times * 1e6, tau=tau, contrast=theta0)  # [K, H, W] log
-    out = []
-    for name, img in zip(names, v):
-        lin = np.exp(img - np.percentile(img, 99))
-        lin = demosaic(lin, scene.events.cfa) if scene.events.cfa else np.repeat(lin[..., None], 3, -1)
-        srgb = linear_to_srgb(np.clip(lin, 0, 1)).astype(np.float32)
-        gt = read_image(scene_path / "gt" / f"{name}.png")
-        out.append(image_metrics(srgb, gt, affine=True, delta_e=False))
-    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+    return leaky_integrator_floor(scene_path, theta0, tau)
 
 
 def summarise(out: Path) -> dict:
