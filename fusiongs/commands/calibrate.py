@@ -68,6 +68,15 @@ def run(args: argparse.Namespace) -> int:
               "counts of pixels firing faster than events.censor (default 2) times it as lower bounds"
               if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
+    spread = th.details.get("threshold_spread")
+    if isinstance(spread, dict):
+        sd = [float(v) ** 0.5 for v in spread["log_variance"]]
+        print(f"threshold spread over pixels (std of log theta, from the events): ON {sd[0]:.3f}, OFF "
+              f"{sd[1]:.3f}; the fit's harmonic mean was raised x{spread['factor'][0]:.3f} / "
+              f"x{spread['factor'][1]:.3f}")
+    gates = [c.get("refractory_gate") for c in th.details.get("per_channel", [])]
+    if any(g and g != "neighbours" and g != "off" for g in gates):
+        print("refractory gate per channel: " + ", ".join(f"{n} {g}" for n, g in zip(th.channels, gates)))
     if not th.scale_known:
         print("note: no frames, so the thresholds are known only up to a common scale: the ON/OFF "
               f"ratio is measured, the scale assumed ({th.details.get('assumed_scale')})", file=sys.stderr)

@@ -250,6 +250,7 @@ def test_cli_writes_calibration_and_prints_json(grey_dir, tmp_path, capsys):
     text = capsys.readouterr().out
     assert "theta_on" in text and "err on" in text and (tmp_path / "d" / "calibration.json").is_file()
     assert "dead time" in text  # what decides the censored counts of deblur
+    assert "threshold spread over pixels" in text  # the correction of the harmonic mean is shown
 
 
 def test_edi_accepts_the_calibration_file(grey_dir, tmp_path):
