@@ -141,7 +141,8 @@ def spatial_hot_pixels(events: EventStream, factor: float = 5.0, floor: float = 
     return (counts > factor * med + floor).reshape(-1)
 
 
-def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -> float:
+def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5,
+                 max_us: float = 10_000.0) -> float:
     """Estimated refractory period (µs) of the sensor: the floor of the distribution of intervals
     between consecutive events of the same pixel.
 
@@ -154,7 +155,10 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -
     when the histogram has no such step. Background activity that ignores the dead time fills the
     bins below it (measured on tuning scenes: a 3-5 Hz sensor's step is 10-15x, not 20x), while
     the smooth rise of a real DAVIS346's intervals (pixel bandwidth: none under 100 µs, then 2-6x
-    more per bin from 1 ms on for several bins) is no step.
+    more per bin from 1 ms on for several bins) is no step. A floor above ``max_us`` is not taken
+    for a dead time: a texture moving at one speed over every pixel (the closed-form plane wave of
+    :mod:`fusiongs.sim.plane_wave`: a floor at 36 ms) makes such a step with no refractory period
+    at all, and a pixel that could fire only every 10 ms would miss almost any motion.
     """
     from fusiongs.events._kernels import interval_histogram
 
@@ -170,6 +174,8 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5) -
     for k in range(1, len(h) - 2):
         before = h[max(0, k - 3):k].max()
         step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
+        if edges[k] > max_us:
+            break
         if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * n_intervals
                 and h[k + 2] <= plateau * step):
             return float(edges[k])

@@ -117,6 +117,18 @@ def _bursts_and_noise(n_noise: int, rng: np.random.Generator) -> EventStream:
     return EventStream.create(np.rint(tt[order]), pp[order] % 20, pp[order] // 20, np.ones(tt.size), 20, 10)
 
 
+def test_a_floor_of_the_intervals_far_beyond_any_dead_time_is_not_one():
+    """Pixels whose events keep >= 36 ms apart (one texture speed everywhere, as the plane-wave
+    scene) have a floor in their intervals but no refractory period."""
+    rng = np.random.default_rng(3)
+    t = np.concatenate([np.cumsum(36_000 + rng.exponential(20_000, 60)) for _ in range(200)])
+    pix = np.repeat(np.arange(200), 60)
+    order = np.argsort(t, kind="stable")
+    ev = EventStream.create(np.rint(t[order]), pix[order] % 20, pix[order] // 20, np.ones(t.size), 20, 10)
+    assert 30_000 <= dead_time_us(ev, max_us=1e5) <= 36_000  # the step is there ...
+    assert dead_time_us(ev) == 0.0  # ... and is not taken for a dead time
+
+
 def test_dead_time_is_found_under_heavy_background_activity():
     # Noise that ignores the dead time fills the bins below it (as 3-5 Hz of background activity
     # does on a 173x130 scene): the jump at the floor is ~15x, which a 20x rule missed.
