@@ -172,10 +172,10 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5,
     h = h.astype(np.float64)
     h = np.concatenate([h, np.zeros(2)])
     for k in range(1, len(h) - 2):
-        before = h[max(0, k - 3):k].max()
-        step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
         if edges[k] > max_us:
             break
+        before = h[max(0, k - 3):k].max()
+        step = max(h[k], h[k + 1])  # a dead time inside bin k splits the step over k and k + 1
         if (h[k] > jump * (before + 1.0) and h[k] + h[k + 1] >= 0.005 * n_intervals
                 and h[k + 2] <= plateau * step):
             return float(edges[k])

@@ -107,10 +107,11 @@ def test_dead_time_is_the_floor_of_the_interval_histogram():
     assert dead_time_us(ev0) < 100  # Poisson intervals: no refractory floor to find
 
 
-def _bursts_and_noise(n_noise: int, rng: np.random.Generator) -> EventStream:
-    """200 pixels whose own events keep >= 500 µs apart, plus noise events at any interval."""
-    t = np.concatenate([np.cumsum(500 + rng.exponential(300, 300)) for _ in range(200)])
-    pix = np.repeat(np.arange(200), 300)
+def _bursts_and_noise(n_noise: int, rng: np.random.Generator, floor_us: float = 500.0,
+                      mean_extra_us: float = 300.0, per_pixel: int = 300) -> EventStream:
+    """200 pixels whose own events keep >= ``floor_us`` apart, plus noise events at any interval."""
+    t = np.concatenate([np.cumsum(floor_us + rng.exponential(mean_extra_us, per_pixel)) for _ in range(200)])
+    pix = np.repeat(np.arange(200), per_pixel)
     noise_t, noise_p = rng.uniform(0, t.max(), n_noise), rng.integers(0, 200, n_noise)
     tt, pp = np.concatenate([t, noise_t]), np.concatenate([pix, noise_p])
     order = np.argsort(tt, kind="stable")
@@ -120,11 +121,7 @@ def _bursts_and_noise(n_noise: int, rng: np.random.Generator) -> EventStream:
 def test_a_floor_of_the_intervals_far_beyond_any_dead_time_is_not_one():
     """Pixels whose events keep >= 36 ms apart (one texture speed everywhere, as the plane-wave
     scene) have a floor in their intervals but no refractory period."""
-    rng = np.random.default_rng(3)
-    t = np.concatenate([np.cumsum(36_000 + rng.exponential(20_000, 60)) for _ in range(200)])
-    pix = np.repeat(np.arange(200), 60)
-    order = np.argsort(t, kind="stable")
-    ev = EventStream.create(np.rint(t[order]), pix[order] % 20, pix[order] // 20, np.ones(t.size), 20, 10)
+    ev = _bursts_and_noise(0, np.random.default_rng(3), floor_us=36_000, mean_extra_us=20_000, per_pixel=60)
     assert 30_000 <= dead_time_us(ev, max_us=1e5) <= 36_000  # the step is there ...
     assert dead_time_us(ev) == 0.0  # ... and is not taken for a dead time
 
