@@ -7,7 +7,9 @@ path and an event sensor from the whole calibration range) and written without f
 leaky-integrator / high-pass intensity image of the events, the anchor of event-only training, at
 the same instants) and fusiongs: affine-fit PSNR / SSIM (EventNeRF's protocol: events fix neither
 brightness nor colour balance), the colour error ΔE00 after the fit, raw PSNR, and the distance to
-the floor; then the means and the issue's targets. Defaults are chosen on ``--split tuning``;
+the floor, and the grey ceiling (the truth's own luminance affine-fitted per channel: the most any
+reconstruction from a grey sensor can score; printed for RGGB sensors too, where it does not bind);
+then the means and the issue's targets. Defaults are chosen on ``--split tuning``;
 figures are reported from ``--split test`` only.
 
     PYTHONPATH=. python benchmarks/bench_event_only_sweep.py --split test --seeds 1000-1007
@@ -30,18 +32,20 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_calibrate import parse_seeds  # noqa: E402
 from benchmarks.bench_event_only_diagnose import hpf_floor  # noqa: E402
 from fusiongs.cli import main as cli  # noqa: E402
+from fusiongs.eval.event_floor import grey_ceiling  # noqa: E402
 from fusiongs.eval.truth import read_sim_facts, true_thresholds  # noqa: E402
 from fusiongs.io.scene_io import load_scene  # noqa: E402
 from fusiongs.train.pipeline import run_deblur  # noqa: E402
 
 
-def make_scene(root: Path, split: str, seed: int, size: str, duration: float | None) -> Path:
-    """The seed's event-only scene (simulated once, then reused)."""
-    scene = root / "scenes" / f"{split}_{seed}"
+def make_scene(root: Path, split: str, seed: int, size: str, duration: float | None, frames: int = 0) -> Path:
+    """The seed's event-only scene (simulated once, then reused); ``frames`` > 0 adds that many
+    blurry frames (the colour anchor's case)."""
+    scene = root / "scenes" / (f"{split}_{seed}" + (f"_f{frames}" if frames else ""))
     if not (scene / "scene.json").is_file():
         extra = ["--duration", str(duration)] if duration else []
-        rc = cli(["simulate", "--sweep-seed", str(seed), "--split", split, "--size", size, "--frames", "0",
-                  "--novel", "6", *extra, "-o", str(scene)])
+        rc = cli(["simulate", "--sweep-seed", str(seed), "--split", split, "--size", size, "--frames",
+                  str(frames), "--novel", "6", *extra, "-o", str(scene)])
         if rc != 0:
             raise SystemExit(f"simulate failed for seed {seed}")
     return scene
@@ -80,7 +84,8 @@ def describe(scene_dir: Path) -> dict:
 
 def format_table(rows: list[dict]) -> str:
     head = (f"{'scene':<11}{'preset':<10}{'cfa':<6}{'motion':>7}{'θ on/off':>12}{'events':>10}{'floor':>8}"
-            f"{'affine PSNR':>13}{'SSIM':>7}{'ΔE00':>7}{'raw':>7}{'vs floor':>10}{'train s':>9}")
+            f"{'affine PSNR':>13}{'SSIM':>7}{'ΔE00':>7}{'raw':>7}{'vs floor':>10}{'grey ceil':>10}"
+            f"{'train s':>9}")
     lines = [head]
     for r in rows:
         d = r["row"]
@@ -88,7 +93,8 @@ def format_table(rows: list[dict]) -> str:
         lines.append(f"{r['scene']:<11}{r['preset']:<10}{r['cfa']:<6}{r['motion'] or float('nan'):>7.2f}"
                      f"{r['theta'][0]:>6.2f}/{r['theta'][1]:<5.2f}{r['events']:>10}{r['floor']['psnr']:>8.2f}"
                      f"{d['affine_psnr']:>13.2f}{d['affine_ssim']:>7.3f}{de:>7.2f}{d['raw_psnr']:>7.2f}"
-                     f"{d['affine_psnr'] - r['floor']['psnr']:>+10.2f}{d['train_seconds']:>9.0f}")
+                     f"{d['affine_psnr'] - r['floor']['psnr']:>+10.2f}{r['ceiling']['psnr']:>10.2f}"
+                     f"{d['train_seconds']:>9.0f}")
     psnr = np.array([r["row"]["affine_psnr"] for r in rows])
     gap = psnr - np.array([r["floor"]["psnr"] for r in rows])
     def met(ok: bool) -> str:
@@ -109,17 +115,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--root", default="bench_out/event_only_sweep", help="scenes and runs are kept here")
     ap.add_argument("--size", default="96x72")
     ap.add_argument("--duration", type=float, default=None, help="seconds of events (default: the sweep's)")
+    ap.add_argument("--frames", type=int, default=0, help="blurry frames in the scene (1: the colour anchor)")
     ap.add_argument("--config", default="event_only")
     ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("--name", default=None,
+                    help="keep this variant's runs in ROOT/runs/NAME/ (the scenes are shared)")
     ap.add_argument("overrides", nargs="*")
     args = ap.parse_args(argv)
     root = Path(args.root)
     rows = []
     for seed in parse_seeds(args.seeds):
-        scene = make_scene(root, args.split, seed, args.size, args.duration)
-        tag = f"{args.split}_{seed}"
-        row = {"scene": tag, **describe(scene), "floor": hpf_floor(scene),
-               "row": run_scene(scene, root / "runs" / tag, args.config, list(args.overrides))}
+        scene = make_scene(root, args.split, seed, args.size, args.duration, args.frames)
+        tag = scene.name
+        row = {"scene": tag, **describe(scene), "floor": hpf_floor(scene), "ceiling": grey_ceiling(scene),
+               "row": run_scene(scene, root / "runs" / (args.name or "") / tag, args.config,
+                                list(args.overrides))}
         rows.append(row)
         print(json.dumps({"scene": tag, "affine_psnr": round(row["row"]["affine_psnr"], 2),
                           "floor": round(row["floor"]["psnr"], 2)}), flush=True)

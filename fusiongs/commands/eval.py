@@ -22,7 +22,7 @@ def run(args: argparse.Namespace) -> int:
     from fusiongs.errors import InputError
     from fusiongs.eval.evaluate import compare_methods, format_table
     from fusiongs.frames.image_io import read_image
-    from fusiongs.train.outputs import read_gt
+    from fusiongs.train.render_io import read_gt
 
     run_dir, gt_dir = Path(args.run), Path(args.gt)
     for p, what in ((run_dir, "run folder"), (gt_dir, "truth folder")):

@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusiongs.frames.image_io import write_png
-    from fusiongs.train.outputs import render_srgb
+    from fusiongs.train.render_io import render_srgb
     from fusiongs.train.restore import restore_state
 
     state, camera, cfg = restore_state(Path(args.run) / "checkpoint.pt")

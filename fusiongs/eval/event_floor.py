@@ -46,3 +46,27 @@ def leaky_integrator_floor(scene_path: str | Path, theta0: float = 0.22,
         gt = read_image(Path(scene_path) / "gt" / f"{name}.png")
         out.append(image_metrics(srgb, gt, affine=True, delta_e=False))
     return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+
+
+def grey_ceiling(scene_path: str | Path) -> dict[str, float]:
+    """The most a grey event sensor's reconstruction can score under the affine-fit protocol: the
+    truth's own luminance (Rec. 709 weights on linear light), as a grey image, affine-fitted per
+    channel to the truth at the scene's requested instants. A grey sensor sees no hue, so however
+    sharp its reconstruction, the fit cannot bring back colour the luminance does not carry.
+
+    Returns:
+        ``{"psnr": dB, "ssim": ...}`` averaged over the instants (8-bit sRGB).
+    """
+    from fusiongs.eval.metrics import image_metrics
+    from fusiongs.frames.image_io import read_image
+    from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
+    from fusiongs.io.scene_io import load_scene
+
+    scene = load_scene(scene_path)
+    out = []
+    for r in scene.renders:
+        gt = read_image(Path(scene_path) / "gt" / f"{r.name}.png")
+        y = srgb_to_linear(gt.astype(np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
+        grey = np.repeat(linear_to_srgb(np.clip(y, 0, 1))[..., None], 3, -1).astype(np.float32)
+        out.append(image_metrics(grey, gt, affine=True, delta_e=False))
+    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}

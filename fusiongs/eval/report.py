@@ -144,7 +144,8 @@ def metric_rows(result: Mapping) -> list[list[str]]:
 def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[str, np.ndarray]],
                  gt: Mapping[str, np.ndarray], max_strips: int = 4,
                  heldout: Mapping[str, Mapping[str, np.ndarray]] | None = None) -> None:
-    """``report.png``: tables, loss / θ curves and picture strips.
+    """``report.png``: tables, curves (the loss and each of its terms, θ, and the PSNR against the
+    truth while training when it was probed) and picture strips.
 
     With truth (``gt`` not empty) each strip is ``methods | truth``; without, the first
     ``max_strips`` deblurred frames as ``blurry | edi | fusiongs``. ``heldout``
@@ -156,7 +157,12 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
 
     rows = metric_rows(result)
     its = history.iteration
-    loss = line_plot({"loss": list(zip(its, history.loss))}, "loss", log_y=True)
+    curves = {"loss": list(zip(its, history.loss))}
+    for term in ("blur", "event", "edi", "intensity"):  # each recorded term that was ever on
+        values = getattr(history, term, [])
+        if any(np.isfinite(v) for v in values if v is not None):
+            curves[term] = [(i, v) for i, v in zip(its, values) if v is not None]
+    loss = line_plot(curves, "loss and its terms", log_y=True)
     th = {}
     if history.theta_pos:
         tp, tn = np.asarray(history.theta_pos), np.asarray(history.theta_neg)
@@ -164,6 +170,11 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
             th[f"theta+{c}"] = list(zip(its, tp[:, c]))
             th[f"theta-{c}"] = list(zip(its, tn[:, c]))
     theta = line_plot(th, "contrast threshold")
+    plots = [loss, theta]
+    if getattr(history, "truth_iteration", None):
+        plots.append(line_plot({"as rendered": list(zip(history.truth_iteration, history.psnr_truth)),
+                                "affine fit": list(zip(history.truth_iteration, history.psnr_truth_fit))},
+                               "PSNR against truth (dB)"))
     strips = []
     if gt:
         views = [n for n in sorted(gt) if n.startswith("deblur_")][:max_strips]
@@ -184,5 +195,5 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
     for name, cols in list((heldout or {}).items())[:max_strips]:
         strips.append(picture_strip({f"{c} {name}" if i == 0 else c: img
                                      for i, (c, img) in enumerate(cols.items())}))
-    parts = ([table_image(rows, 520)] if rows else []) + [side_by_side([loss, theta])] + strips
+    parts = ([table_image(rows, 520)] if rows else []) + [side_by_side(plots)] + strips
     write_png(path, stack_rows(parts))

@@ -197,6 +197,24 @@ def hpf_images(events: EventStream, t_range: tuple[float, float], n: int, tau: f
     return torch.from_numpy(times), torch.from_numpy(v[..., None]).to(device)
 
 
+def event_stereo_images(events: EventStream, t_range: tuple[float, float], n: int, tau: float,
+                        theta0: float, colour: bool) -> torch.Tensor:
+    """``[n, H, W, 1]`` float32 images in [0, 1] at ``n`` instants evenly over ``t_range`` (the
+    instants :func:`fusiongs.train.state.build_state` poses an event-only scene's first Gaussians
+    at) for the plane-sweep stereo of a scene without frames: ``0.5 · exp(V)`` of the HPF image
+    ``V`` (log units, 0 where nothing fired lately). A moving edge leaves the same trail in views
+    a few tens of milliseconds apart, shifted by its parallax, which is what the sweep matches.
+    ``colour`` (a CFA sensor): a 2x2 box mean first, so that the mosaic of per-channel values
+    does not look like texture.
+    """
+    _, v = hpf_images(events, t_range, n, tau, theta0, torch.device("cpu"))  # [n, H, W, 1]
+    if colour:  # each output pixel mixes the four channels of a Bayer cell
+        v = torch.nn.functional.avg_pool2d(torch.nn.functional.pad(v.permute(0, 3, 1, 2), (0, 1, 0, 1),
+                                                                   mode="replicate"), 2, stride=1)
+        v = v.permute(0, 2, 3, 1)
+    return (0.5 * torch.exp(v)).clamp(0.0, 1.0).contiguous()
+
+
 def pvc_readouts(events: EventStream, instants: np.ndarray, t_range: tuple[float, float],
                  spacing: float, tau: float, theta0: float, device: torch.device
                  ) -> tuple[torch.Tensor, torch.Tensor]:

@@ -17,6 +17,7 @@ from fusiongs.errors import InputError
 from fusiongs.train.state import FusionState
 
 FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
+TERMS = ("blur", "event", "edi", "intensity")  # the loss terms recorded (StepResult.parts keys)
 
 
 @dataclass
@@ -30,15 +31,26 @@ class History:
     blur: list[float] = field(default_factory=list)
     event: list[float] = field(default_factory=list)
     edi: list[float] = field(default_factory=list)
+    intensity: list[float] = field(default_factory=list)  # event-only mode's HPF anchor term
     theta_pos: list[list[float]] = field(default_factory=list)
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
     event_weight: list[float] = field(default_factory=list)  # λ_ev (α in event-only mode)
     psnr_input: list[float] = field(default_factory=list)    # running PSNR of re-rendered blurry frames
     step_seconds: list[float] = field(default_factory=list)  # wall time of each iteration
+    # the truth probe (fusiongs.train.truth_probe): iterations probed, PSNR as rendered / affine-fit
+    truth_iteration: list[int] = field(default_factory=list)
+    psnr_truth: list[float] = field(default_factory=list)
+    psnr_truth_fit: list[float] = field(default_factory=list)
     seconds: float = 0.0
     render_seconds: float = 0.0      # rasteriser forward passes
     backward_seconds: float = 0.0    # backward through losses and rasteriser
+
+    def __post_init__(self) -> None:
+        # a checkpoint written before the intensity term was recorded: its iterations had none
+        missing = len(self.iteration) - len(self.intensity)
+        if missing > 0:
+            self.intensity = [math.nan] * missing + list(self.intensity)
 
 
 @dataclass
@@ -53,11 +65,10 @@ class PendingRow:
 
 def history_row(loss: torch.Tensor, parts: dict[str, torch.Tensor], state: FusionState,
          psnr: torch.Tensor | None) -> torch.Tensor:
-    """``[5 + 2C]`` float32 on the device: loss, blur, event and EDI terms (NaN when off), running
-    PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
+    """``[6 + 2C]`` float32 on the device: loss, blur, event, EDI and intensity terms (NaN when
+    off), running PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
     nan = loss.new_full((), math.nan, dtype=torch.float32)
-    terms = [loss, parts.get("blur", nan), parts.get("event", nan), parts.get("edi", nan),
-             nan if psnr is None else psnr]
+    terms = [loss, *(parts.get(k, nan) for k in TERMS), nan if psnr is None else psnr]
     with torch.no_grad():
         tp, tn = state.threshold.scalar()
     return torch.cat([torch.stack([t.float() for t in terms]), tp.reshape(-1).float(),
@@ -74,11 +85,12 @@ def flush_pending(h: History, pending: list[PendingRow], bar) -> None:
     if not pending:
         return
     for p, v in zip(pending, torch.stack([p.row for p in pending]).tolist()):
-        for name, x in zip(("loss", "blur", "event", "edi", "psnr_input"), v):
+        head = ("loss", *TERMS, "psnr_input")
+        for name, x in zip(head, v):
             getattr(h, name).append(x)
-        c = (len(v) - 5) // 2
-        h.theta_pos.append(v[5:5 + c])
-        h.theta_neg.append(v[5 + c:])
+        c = (len(v) - len(head)) // 2
+        h.theta_pos.append(v[len(head):len(head) + c])
+        h.theta_neg.append(v[len(head) + c:])
         h.iteration.append(p.iteration)
         h.n_gaussians.append(p.n_gaussians)
         h.event_weight.append(float(p.event_weight))
@@ -89,21 +101,25 @@ def flush_pending(h: History, pending: list[PendingRow], bar) -> None:
     bar.set_postfix(loss=f"{h.loss[-1]:.4f}", psnr=f"{h.psnr_input[-1]:.2f}", n=h.n_gaussians[-1])
 
 
-HISTORY_KEYS = ("iteration", "loss", "blur", "event", "edi", "event_weight", "theta_pos", "theta_neg",
+HISTORY_KEYS = ("iteration", "loss", *TERMS, "event_weight", "theta_pos", "theta_neg",
                 "n_gaussians", "psnr_input", "step_seconds")
 
 
 def history_rows(h: History) -> list[dict]:
     """One plain dict per recorded iteration: total loss, each term (NaN when off), the event weight
     (λ_ev, or α in event-only mode), θ per polarity and channel, the number of Gaussians, the
-    running PSNR of the re-rendered blurry frames and the step time."""
-    n = len(h.iteration)
+    running PSNR of the re-rendered blurry frames, the step time and, on the iterations the truth
+    probe scored, ``psnr_truth`` / ``psnr_truth_fit`` (None elsewhere)."""
+    probed = {it: j for j, it in enumerate(h.truth_iteration)}
     rows = []
-    for i in range(n):
+    for i in range(len(h.iteration)):
         row = {}
         for k in HISTORY_KEYS:
             v = getattr(h, k)
             row[k] = v[i] if i < len(v) else None
+        j = probed.get(h.iteration[i])
+        row["psnr_truth"] = h.psnr_truth[j] if j is not None else None
+        row["psnr_truth_fit"] = h.psnr_truth_fit[j] if j is not None else None
         rows.append(row)
     return rows
 

@@ -12,28 +12,18 @@ import torch
 from fusiongs.atomic import write_text
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples, write_tum
-from fusiongs.frames.image_io import read_image, write_png
+from fusiongs.frames.image_io import write_png
 from fusiongs.frames.response import linear_to_srgb, response_to_linear
 from fusiongs.io.scene import Scene
 from fusiongs.scene.ply import save_ply
 from fusiongs.train.config import save_config
+from fusiongs.train.render_io import render_srgb
 from fusiongs.train.state import FusionState
 from fusiongs.train.trainer import Trained
 
 TRAJECTORY_FILE = "trajectory.txt"  # the refined camera path (the pose stage's own is trajectory_initial.txt)
 TRAJECTORY_RATE_HZ = 200.0  # the written path is at least this dense
 
-
-
-@torch.no_grad()
-def render_srgb(state: FusionState, camera, times, backend: str = "auto", batch: int = 8) -> np.ndarray:
-    """Sharp sRGB renders ``[T, H, W, 3]`` in [0, 1] at instants ``times`` (s)."""
-    t = torch.as_tensor(np.asarray(times, dtype=np.float64))
-    out = []
-    for i in range(0, t.shape[0], batch):
-        lin, _, _ = state.render(camera, t[i:i + batch], backend)
-        out.append(linear_to_srgb(lin.clamp(0, 1)).cpu().numpy())
-    return np.concatenate(out) if out else np.zeros((0, camera.height, camera.width, 3), np.float32)
 
 
 def frames_srgb(scene: Scene) -> np.ndarray:
@@ -175,14 +165,3 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     write_thresholds(state, out / "thresholds.json")
     write_trajectory(tr, scene, out / TRAJECTORY_FILE)
     return rendered, written, render_only
-
-
-def read_gt(gt_dir: Path, names) -> dict[str, np.ndarray]:
-    """Truth images ``gt_dir/<name>.png`` that exist, as sRGB ``[H, W, 3]``."""
-    out = {}
-    for name in names:
-        p = gt_dir / f"{name}.png"
-        if p.is_file():
-            img = read_image(p)
-            out[name] = np.repeat(img, 3, axis=-1) if img.shape[-1] == 1 else img
-    return out

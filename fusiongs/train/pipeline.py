@@ -93,7 +93,7 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     from fusiongs.eval.evaluate import colour_metrics
     from fusiongs.eval.holdout import compare_sharpness
     from fusiongs.eval.report import write_report
-    from fusiongs.train.outputs import read_gt
+    from fusiongs.train.render_io import read_gt
 
     anchor = anchor or ColourAnchor()
     ours = _by_view(images)

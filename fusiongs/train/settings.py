@@ -91,6 +91,10 @@ class EventSettings:
     windows_inside: int = 1          # windows between pairs of the N in-exposure instants
     windows_free: int = 1            # windows of log-uniform length anywhere in the stream
     min_window: float = 0.001        # shortest free window (s)
+    max_window: float = 0.0          # longest free window (s); 0 = one frame interval (without
+                                     # frames: the whole recording)
+    window_events: float = 0.0       # ... and at most the time an average pixel takes to fire this
+                                     # many events (0 = no such cap; train/step.py)
     colour_mode: Literal["mask", "demosaic"] = "mask"
     channel_weights: tuple[float, float, float] = (0.4, 0.2, 0.4)
     grey_weights: tuple[float, float, float] = (0.299, 0.587, 0.114)
@@ -101,7 +105,7 @@ class EventSettings:
     censor_radius: int = 0           # ... and those of their neighbours within this many pixels
 
     def __post_init__(self) -> None:
-        _need_positive("events", self, ("censor",), zero_ok=True)
+        _need_positive("events", self, ("censor", "max_window", "window_events"), zero_ok=True)
         if self.censor_radius < 0:
             raise ConfigError("config", "events.censor_radius", "an integer >= 0", repr(self.censor_radius))
 
@@ -185,11 +189,15 @@ class OutputSettings:
     checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
     exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (train/exposure_ratio.py)
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
+    truth_every: int = 100           # PSNR against gt/ every N iterations (history.jsonl); 0 = off
 
     def __post_init__(self) -> None:
         if not self.ratio_eps > 0:
             raise ConfigError("config", "output.ratio_eps", "a number > 0 (linear units)",
                               repr(self.ratio_eps))
+        if self.truth_every < 0:
+            raise ConfigError("config", "output.truth_every", "an integer >= 0 (0 = off)",
+                              repr(self.truth_every))
 
 
 @dataclass

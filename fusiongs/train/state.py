@@ -64,6 +64,7 @@ def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
     return 1.1 * (radius + depth_max)
 
 
+EVENT_ONLY_VIEWS = 16  # without frames: the instants the first Gaussians are posed (and matched) at
 STEREO_FAR_FACTOR = 1000.0  # the far-bound sweep of init.far_from_stereo reaches this x depth_min
 
 
@@ -168,7 +169,8 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
     if data.n_frames:
         t_init = data.exposures.mean(dim=1)
     else:
-        t_init = torch.linspace(data.t_range[0], data.t_range[1], 16, dtype=torch.float64, device=device)
+        t_init = torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64,
+                                device=device)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
     model, far = initial_gaussians(data, c2w, cfg, gen, init_images)

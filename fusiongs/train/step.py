@@ -168,6 +168,22 @@ def snap_to_readouts(windows: torch.Tensor, readouts: torch.Tensor, t_min: float
     return torch.stack([t_a, t_b], dim=1), idx
 
 
+def longest_free_window(cfg: DeblurConfig, data: TrainData) -> float:
+    """The longest free event window (s): one frame interval (the whole recording without frames),
+    at most ``events.max_window`` (when set) and at most the time in which an average pixel fires
+    ``events.window_events`` events (when set: the sensor's mean rate over all pixels and the
+    recording). A window's count carries every event's share of threshold mismatch, refractory
+    loss and noise, so capping the events it holds caps that accumulated error, while a slow
+    scene (few events per second) keeps long windows."""
+    ev = cfg.events
+    span = data.t_range[1] - data.t_range[0]
+    longest = min(ev.max_window or data.frame_interval, span)
+    if ev.window_events > 0 and data.events is not None and len(data.events):
+        rate = len(data.events) / (data.camera.width * data.camera.height * span)  # events / pixel / s
+        longest = min(longest, ev.window_events / rate)
+    return float(longest)
+
+
 def own_channel(linear: torch.Tensor, data: TrainData, grey_weights) -> torch.Tensor:
     """``[H, W, 1]``: what each event pixel sees of a linear render ``[H, W, 3]``."""
     if data.cfa_index is None:
@@ -220,8 +236,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
     free = torch.zeros(0, 2, dtype=torch.float64, device=gen.device)
     readout = None
     if use_events and cfg.events.windows_free > 0:
-        free = sample_free_windows(cfg.events.windows_free, data.t_range, data.frame_interval, gen,
-                                   min(cfg.events.min_window, data.frame_interval))
+        longest = longest_free_window(cfg, data)
+        free = sample_free_windows(cfg.events.windows_free, data.t_range, longest, gen,
+                                   min(cfg.events.min_window, longest))
         if data.hpf is not None:
             free, readout = snap_to_readouts(free, data.hpf_times, data.t_range[0])
         if data.pvc_times is not None:  # pvc targets exist at read-outs only

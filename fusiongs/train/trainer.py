@@ -32,12 +32,20 @@ from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer
 from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
-from fusiongs.train.data import TrainData, edi_images, hpf_images, prepare_data, pvc_readouts
+from fusiongs.train.data import (
+    TrainData,
+    edi_images,
+    event_stereo_images,
+    hpf_images,
+    prepare_data,
+    pvc_readouts,
+)
 from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
-from fusiongs.train.state import FusionState, build_state, scene_extent
+from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, scene_extent
 from fusiongs.train.step import training_step
+from fusiongs.train.truth_probe import probe_psnr, should_probe, truth_probe
 
 
 @dataclass
@@ -200,6 +208,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                disable=not (cfg.output.progress and tty), desc="fusiongs", dynamic_ncols=True,
                file=sys.stderr)
     pending: list[PendingRow] = []
+    probe = truth_probe(scene) if cfg.output.truth_every > 0 else None
     t_begin, seconds_before = time.perf_counter(), history.seconds
 
     def save() -> None:
@@ -234,6 +243,11 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             pending.append(PendingRow(it, row, state.model.n, lam_ev))
             if (it + 1) % FLUSH_EVERY == 0:
                 flush_pending(history, pending, bar)
+            if probe is not None and should_probe(it, cfg.output.truth_every, cfg.optim.iterations):
+                raw, fit = probe_psnr(state, data.camera, probe, cfg.backend)
+                history.truth_iteration.append(it)
+                history.psnr_truth.append(raw)
+                history.psnr_truth_fit.append(fit)
             every = cfg.output.checkpoint_every
             if every and (it + 1) % every == 0 and it + 1 < cfg.optim.iterations:
                 save()
@@ -261,9 +275,16 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
 
 def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
     """Images the stereo initialisation matches: the EDI frames when there are events, else the
-    (blurry) frames in linear light; None for the random initialisation or without frames."""
-    if cfg.init.method == "random" or data.n_frames == 0:
+    (blurry) frames in linear light; without frames the HPF images of the events at the instants
+    the first Gaussians are posed at (:func:`fusiongs.train.data.event_stereo_images`); None for
+    the random initialisation."""
+    if cfg.init.method == "random":
         return None
+    if data.n_frames == 0:
+        if data.events is None or not len(data.events):
+            return None
+        return event_stereo_images(data.events, data.t_range, EVENT_ONLY_VIEWS, cfg.event_only.intensity_tau,
+                                   cfg.threshold.init, data.cfa_index is not None)
     if data.edi is not None:
         return data.edi
     return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))

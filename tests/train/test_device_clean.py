@@ -226,14 +226,17 @@ def test_records_are_read_back_together_and_a_diverged_loss_stops_training():
             self.postfix = kw
 
     h, bar = History(), Bar()
-    pending = [PendingRow(0, torch.tensor([1.0, 0.5, math.nan, math.nan, 20.0, 0.2, 0.3]), 10, 0.0),
-               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, math.nan, 21.0, 0.21, 0.31]), 12, 0.1)]
+    nan = math.nan
+    pending = [PendingRow(0, torch.tensor([1.0, 0.5, nan, nan, nan, 20.0, 0.2, 0.3]), 10, 0.0),
+               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, nan, 0.05, 21.0, 0.21, 0.31]), 12, 0.1)]
     flush_pending(h, pending, bar)
     assert not pending and h.iteration == [0, 1] and h.n_gaussians == [10, 12]
     assert h.loss == pytest.approx([1.0, 0.9]) and math.isnan(h.event[0]) and h.event[1] == pytest.approx(0.1)
     assert h.theta_pos == [[pytest.approx(0.2)], [pytest.approx(0.21)]] and bar.postfix["n"] == 12
+    assert h.theta_neg == [[pytest.approx(0.3)], [pytest.approx(0.31)]] and h.psnr_input[1] == 21.0
+    assert math.isnan(h.intensity[0]) and h.intensity[1] == pytest.approx(0.05)
     with pytest.raises(InputError, match="nan at iteration 2"):
-        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 7), 12, 0.1)], bar)
+        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 8), 12, 0.1)], bar)
 
 
 # ------------------------------------------------------------------------------------------- CUDA

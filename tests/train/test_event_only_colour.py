@@ -83,6 +83,15 @@ def test_event_loss_ends_below_its_value_at_the_start_of_the_alpha_ramp(events_o
     assert all(e is not None and math.isfinite(e) for e in event[first:])
     start, end = np.mean(event[first:first + k]), np.mean(event[-k:])
     assert end < start, (start, end)
+    # every term is recorded: the intensity anchor's too, on every iteration while 1 − α > 0
+    assert all(r["intensity"] is not None and math.isfinite(r["intensity"]) for r in rows)
+    # the truth probe scored the novel views every 100 iterations and after the last one; its last
+    # figure is the renders that metrics.json scores (no frame: no correction, no anchor)
+    probed = [r["iteration"] for r in rows if r["psnr_truth"] is not None]
+    assert probed == [99, 199]
+    novel = m["affine_fit"]["mean"]["novel"]["fusiongs"]["psnr"]
+    assert rows[-1]["psnr_truth_fit"] == pytest.approx(novel, abs=0.01)
+    assert rows[-1]["psnr_truth"] == pytest.approx(m["mean"]["novel"]["fusiongs"]["psnr"], abs=0.01)
     # the metrics of an event-only run: raw and affine-fit PSNR, ΔE00 after the fit, no anchor
     assert m["colour_anchor"]["anchor"] == "none" and "affine fit only" in m["colour_anchor"]["label"]
     assert "delta_e00" in m["affine_fit"]["mean"]["novel"]["fusiongs"]

@@ -94,3 +94,29 @@ def test_sample_windows_deterministic_and_clamps_inside_to_event_range():
     assert torch.equal(a, b) and a[:36].min() >= 0.02
     with pytest.raises(InputError, match="frame"):
         sample_windows(exposures, 1, 1, 1, (0.0, 1.0), 0.1)
+
+
+def _window_data(n_events: int, frame_interval: float, span: float = 2.0):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(t_range=(1.0, 1.0 + span), frame_interval=frame_interval, events=[0] * n_events,
+                           camera=SimpleNamespace(width=40, height=25))
+
+
+@pytest.mark.parametrize("overrides, n_events, frame_interval, want", [
+    ([], 1000, 0.05, 0.05),                                     # one frame interval
+    ([], 1000, 2.0, 2.0),                                       # no frames: the recording
+    (["events.max_window=0.1"], 1000, 2.0, 0.1),
+    # 40x25 pixels, 2 s: 1000 events is 0.5 per pixel per second, so 4 events take 8 s (> the span)
+    (["events.window_events=4"], 1000, 2.0, 2.0),
+    (["events.window_events=4"], 100_000, 2.0, 0.08),           # 50 per pixel per second: 4 in 80 ms
+    (["events.window_events=4", "events.max_window=0.05"], 100_000, 2.0, 0.05),
+    (["events.window_events=4"], 100_000, 0.05, 0.05),          # frames closer than that
+    (["events.window_events=4"], 0, 2.0, 2.0),                  # no events: no rate to cap by
+])
+def test_the_longest_free_window(overrides, n_events, frame_interval, want):
+    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.train.step import longest_free_window
+
+    got = longest_free_window(resolve_config(None, overrides), _window_data(n_events, frame_interval))
+    assert isinstance(got, float) and got == pytest.approx(want)
