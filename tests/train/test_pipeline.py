@@ -49,6 +49,9 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     assert [r["iteration"] for r in rows] == list(range(10))
     assert all(r["loss"] is not None and r["n_gaussians"] > 0 and len(r["theta_pos"]) == 1 for r in rows)
     assert {"blur", "event", "event_weight", "psnr_input"} <= set(rows[0])
+    # the truth probe scores the renders after the last iteration (10 < output.truth_every)
+    assert [r["iteration"] for r in rows if r["psnr_truth"] is not None] == [9]
+    assert 5.0 < rows[-1]["psnr_truth"] < 60.0 and rows[-1]["psnr_truth_fit"] >= rows[-1]["psnr_truth"] - 0.5
     calib = json.loads((tiny_run / "calibration.json").read_text())
     assert calib["format"] == "fusiongs-calibration" and calib["thresholds"]["channels"] == ["grey"]
     assert "novel" in metrics["mean"]
