@@ -38,14 +38,13 @@ from fusiongs.io.scene_io import load_scene  # noqa: E402
 from fusiongs.train.pipeline import run_deblur  # noqa: E402
 
 
-def make_scene(root: Path, split: str, seed: int, size: str, duration: float | None, frames: int = 0) -> Path:
-    """The seed's event-only scene (simulated once, then reused); ``frames`` > 0 adds that many
-    blurry frames (the colour anchor's case)."""
-    scene = root / "scenes" / (f"{split}_{seed}" + (f"_f{frames}" if frames else ""))
+def make_scene(root: Path, split: str, seed: int, size: str, duration: float | None) -> Path:
+    """The seed's event-only scene (simulated once, then reused)."""
+    scene = root / "scenes" / f"{split}_{seed}"
     if not (scene / "scene.json").is_file():
         extra = ["--duration", str(duration)] if duration else []
-        rc = cli(["simulate", "--sweep-seed", str(seed), "--split", split, "--size", size, "--frames",
-                  str(frames), "--novel", "6", *extra, "-o", str(scene)])
+        rc = cli(["simulate", "--sweep-seed", str(seed), "--split", split, "--size", size, "--frames", "0",
+                  "--novel", "6", *extra, "-o", str(scene)])
         if rc != 0:
             raise SystemExit(f"simulate failed for seed {seed}")
     return scene
@@ -115,7 +114,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--root", default="bench_out/event_only_sweep", help="scenes and runs are kept here")
     ap.add_argument("--size", default="96x72")
     ap.add_argument("--duration", type=float, default=None, help="seconds of events (default: the sweep's)")
-    ap.add_argument("--frames", type=int, default=0, help="blurry frames in the scene (1: the colour anchor)")
     ap.add_argument("--config", default="event_only")
     ap.add_argument("--json", default=None, help="write the rows here")
     ap.add_argument("--name", default=None,
@@ -125,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
     root = Path(args.root)
     rows = []
     for seed in parse_seeds(args.seeds):
-        scene = make_scene(root, args.split, seed, args.size, args.duration, args.frames)
+        scene = make_scene(root, args.split, seed, args.size, args.duration)
         tag = scene.name
         row = {"scene": tag, **describe(scene), "floor": hpf_floor(scene), "ceiling": grey_ceiling(scene),
                "row": run_scene(scene, root / "runs" / (args.name or "") / tag, args.config,

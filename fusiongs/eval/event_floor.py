@@ -13,6 +13,22 @@ from pathlib import Path
 import numpy as np
 
 
+def _fitted_at_instants(scene_path: str | Path, image_at) -> dict[str, float]:
+    """Affine-fit PSNR / SSIM, averaged over the scene's requested instants, of ``image_at(scene,
+    names, times)`` (sRGB ``[K, H, W, 3]`` in [0, 1], one per instant) against ``SCENE/gt/NAME.png``."""
+    from fusiongs.eval.metrics import image_metrics
+    from fusiongs.frames.image_io import read_image
+    from fusiongs.io.scene_io import load_scene
+
+    scene = load_scene(scene_path)
+    names = [r.name for r in scene.renders]
+    times = np.array([r.t for r in scene.renders])
+    truth = [read_image(Path(scene_path) / "gt" / f"{name}.png") for name in names]
+    out = [image_metrics(img, gt, affine=True, delta_e=False)
+           for img, gt in zip(image_at(scene, truth, times), truth)]
+    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+
+
 def leaky_integrator_floor(scene_path: str | Path, theta0: float = 0.22,
                            tau: float = 0.05) -> dict[str, float]:
     """Affine-fit PSNR / SSIM of the events' high-pass intensity image at the scene's requested
@@ -27,25 +43,18 @@ def leaky_integrator_floor(scene_path: str | Path, theta0: float = 0.22,
     Returns:
         ``{"psnr": dB, "ssim": ...}`` after a per-channel affine fit (8-bit sRGB).
     """
-    from fusiongs.eval.metrics import image_metrics
     from fusiongs.events.cfa import demosaic
     from fusiongs.events.hpf import high_pass_filter
-    from fusiongs.frames.image_io import read_image
     from fusiongs.frames.response import linear_to_srgb
-    from fusiongs.io.scene_io import load_scene
 
-    scene = load_scene(scene_path)
-    names = [r.name for r in scene.renders]
-    times = np.array([r.t for r in scene.renders])
-    v = high_pass_filter(scene.events, times * 1e6, tau=tau, contrast=theta0)  # [K, H, W] log
-    out = []
-    for name, img in zip(names, v):
-        lin = np.exp(img - np.percentile(img, 99))
-        lin = demosaic(lin, scene.events.cfa) if scene.events.cfa else np.repeat(lin[..., None], 3, -1)
-        srgb = linear_to_srgb(np.clip(lin, 0, 1)).astype(np.float32)
-        gt = read_image(Path(scene_path) / "gt" / f"{name}.png")
-        out.append(image_metrics(srgb, gt, affine=True, delta_e=False))
-    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+    def hpf_image(scene, truth, times):
+        v = high_pass_filter(scene.events, times * 1e6, tau=tau, contrast=theta0)  # [K, H, W] log
+        for img in v:
+            lin = np.exp(img - np.percentile(img, 99))
+            lin = demosaic(lin, scene.events.cfa) if scene.events.cfa else np.repeat(lin[..., None], 3, -1)
+            yield linear_to_srgb(np.clip(lin, 0, 1)).astype(np.float32)
+
+    return _fitted_at_instants(scene_path, hpf_image)
 
 
 def grey_ceiling(scene_path: str | Path) -> dict[str, float]:
@@ -57,16 +66,11 @@ def grey_ceiling(scene_path: str | Path) -> dict[str, float]:
     Returns:
         ``{"psnr": dB, "ssim": ...}`` averaged over the instants (8-bit sRGB).
     """
-    from fusiongs.eval.metrics import image_metrics
-    from fusiongs.frames.image_io import read_image
     from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
-    from fusiongs.io.scene_io import load_scene
 
-    scene = load_scene(scene_path)
-    out = []
-    for r in scene.renders:
-        gt = read_image(Path(scene_path) / "gt" / f"{r.name}.png")
-        y = srgb_to_linear(gt.astype(np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
-        grey = np.repeat(linear_to_srgb(np.clip(y, 0, 1))[..., None], 3, -1).astype(np.float32)
-        out.append(image_metrics(grey, gt, affine=True, delta_e=False))
-    return {k: float(np.mean([o[k] for o in out])) for k in ("psnr", "ssim")}
+    def luminance(scene, truth, times):
+        for gt in truth:
+            y = srgb_to_linear(gt.astype(np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
+            yield np.repeat(linear_to_srgb(np.clip(y, 0, 1))[..., None], 3, -1).astype(np.float32)
+
+    return _fitted_at_instants(scene_path, luminance)

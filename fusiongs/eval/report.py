@@ -159,7 +159,7 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
     its = history.iteration
     curves = {"loss": list(zip(its, history.loss))}
     for term in ("blur", "event", "edi", "intensity"):  # each recorded term that was ever on
-        values = getattr(history, term, [])
+        values = getattr(history, term)
         if any(np.isfinite(v) for v in values if v is not None):
             curves[term] = [(i, v) for i, v in zip(its, values) if v is not None]
     loss = line_plot(curves, "loss and its terms", log_y=True)
@@ -171,7 +171,7 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
             th[f"theta-{c}"] = list(zip(its, tn[:, c]))
     theta = line_plot(th, "contrast threshold")
     plots = [loss, theta]
-    if getattr(history, "truth_iteration", None):
+    if history.truth_iteration:
         plots.append(line_plot({"as rendered": list(zip(history.truth_iteration, history.psnr_truth)),
                                 "affine fit": list(zip(history.truth_iteration, history.psnr_truth_fit))},
                                "PSNR against truth (dB)"))

@@ -84,8 +84,8 @@ def flush_pending(h: History, pending: list[PendingRow], bar) -> None:
     """
     if not pending:
         return
+    head = ("loss", *TERMS, "psnr_input")  # the row's leading values, then θ+ [C], θ− [C]
     for p, v in zip(pending, torch.stack([p.row for p in pending]).tolist()):
-        head = ("loss", *TERMS, "psnr_input")
         for name, x in zip(head, v):
             getattr(h, name).append(x)
         c = (len(v) - len(head)) // 2
