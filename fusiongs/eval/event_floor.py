@@ -59,18 +59,20 @@ def leaky_integrator_floor(scene_path: str | Path, theta0: float = 0.22,
 
 def grey_ceiling(scene_path: str | Path) -> dict[str, float]:
     """The most a grey event sensor's reconstruction can score under the affine-fit protocol: the
-    truth's own luminance (Rec. 709 weights on linear light), as a grey image, affine-fitted per
-    channel to the truth at the scene's requested instants. A grey sensor sees no hue, so however
+    truth's own grey (linear light weighted as a grey sensor and the model see it, Rec. 601:
+    :data:`fusiongs.losses.event.REC601`), affine-fitted per channel to the truth at the scene's
+    requested instants. A grey sensor sees no hue, so however
     sharp its reconstruction, the fit cannot bring back colour the luminance does not carry.
 
     Returns:
         ``{"psnr": dB, "ssim": ...}`` averaged over the instants (8-bit sRGB).
     """
     from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
+    from fusiongs.losses.event import REC601
 
     def luminance(scene, truth, times):
         for gt in truth:
-            y = srgb_to_linear(gt.astype(np.float64)) @ np.array([0.2126, 0.7152, 0.0722])
+            y = srgb_to_linear(gt.astype(np.float64)) @ np.array(REC601)
             yield np.repeat(linear_to_srgb(np.clip(y, 0, 1))[..., None], 3, -1).astype(np.float32)
 
     return _fitted_at_instants(scene_path, luminance)
