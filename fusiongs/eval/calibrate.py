@@ -54,6 +54,7 @@ import torch
 
 from fusiongs.errors import InputError
 from fusiongs.eval.calibrate_fit import PairData, search_both
+from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
 from fusiongs.events.stats import dead_time_us, fast_in_spans, spatial_hot_pixels, threshold_spread
@@ -91,11 +92,20 @@ class CalibrateOptions:
             uncertainty (relative std of either threshold) exceeds this, the channel is fitted
             again with the pixel's own gate (a dark scene's events sit on fast edges, and the
             neighbours' gate may leave pairs without signal). Tuning scenes: at most 0.06.
+        own_gate_max_spread: the refit with the pixel's own gate is made only when the fit failed
+            outright or the measured threshold spread is small (``exp(var log theta)`` of both
+            polarities at most this): the own gate leaves out the pixels with small thresholds, a
+            selection that grows with the spread (tuning seed 75, RESULTS.md, session 12; test
+            seed 1076, session 15: +84 %). Otherwise the uncertain neighbours' fit is kept.
         dead_time_jump: jump factor of the interval histogram that marks the dead time
             (:func:`fusiongs.events.stats.dead_time_us`).
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision
             (:func:`shrink_channels`; 0 keeps every channel on its own).
+        channel_outlier: a channel whose estimate lies more than this many combined standard
+            deviations from the other channels' common value, while those agree with each other,
+            has its uncertainty widened to that distance before pooling (0: never); see
+            :func:`discrepant_channels`.
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
         iv_offsets: fit the two indicator offsets in the IV model
             (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`).
@@ -128,8 +138,10 @@ class CalibrateOptions:
     refractory_radius: int = 1
     refractory_self: bool = False
     refractory_max_uncertainty: float = 0.1
+    own_gate_max_spread: float = 1.05
     dead_time_jump: float = 5.0
     channel_prior: float = 0.05
+    channel_outlier: float = 3.0
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
@@ -259,6 +271,12 @@ def _unreliable(res: dict, opts: CalibrateOptions) -> bool:
     return not all(np.isfinite(r) and r <= opts.refractory_max_uncertainty for r in rel)
 
 
+def _failed(res: dict) -> bool:
+    """The fit gave no positive solution, or no finite estimate."""
+    vals = [res.get(k) for k in ("theta_pos", "theta_neg")]
+    return res.get("iv", "").startswith("failed") or not all(v is not None and np.isfinite(v) for v in vals)
+
+
 def _gate_name(opts: CalibrateOptions, gap: float) -> str:
     if gap <= 0 or (opts.refractory_radius <= 0 and not opts.refractory_self):
         return "off"
@@ -318,6 +336,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                                opts.refractory_self)
     sat = np.asarray(lin.max(axis=-1)).reshape(f, -1) >= opts.saturation
     neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
+    var, n_spread = threshold_spread(events, hot)
+    spread_small = bool(np.all(np.exp(var) <= opts.own_gate_max_spread))
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
     for c in range(len(names)):
         sel = np.flatnonzero((chan == c) & ~hot)
@@ -344,7 +364,9 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                              f"of channel {names[c]} between the frames (neither saturated nor dark)",
                              f"{int(data.valid.sum())}")
         res = search_both(data, opts, rng)
-        if gate == "neighbours" and _unreliable(res, opts):
+        if gate == "neighbours" and _unreliable(res, opts) and not (_failed(res) or spread_small):
+            gate = "neighbours (uncertain; the pixel's own gate would select by threshold at this spread)"
+        elif gate == "neighbours" and _unreliable(res, opts):
             # A dark scene's events sit on fast edges and every pixel near one is gated: what is
             # left carries too little signal to measure anything, so the pixel's own gate is used.
             near = {k: res.get(k) for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")}
@@ -365,15 +387,19 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     tp, sp = np.array(out_p), np.array(sd_p)
     tn, sn = np.array(out_n), np.array(sd_n)
     if opts.spread_correction:
-        var, n_spread = threshold_spread(events, hot)
         fac = np.exp(var)
         tp, sp, tn, sn = tp * fac[0], sp * fac[0], tn * fac[1], sn * fac[1]
         details["threshold_spread"] = {"log_variance": var.tolist(), "pixels": n_spread.tolist(),
                                        "factor": fac.tolist()}
     if len(names) > 1 and opts.channel_prior > 0:
         details["per_channel_unpooled"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist()}
-        tp, sp = shrink_channels(tp, sp, opts.channel_prior)
-        tn, sn = shrink_channels(tn, sn, opts.channel_prior)
+        pooled = []
+        for theta, std in ((tp, sp), (tn, sn)):
+            wide = discrepant_channels(theta, std, opts.channel_prior, opts.channel_outlier)
+            pooled.append(shrink_channels(theta, wide, opts.channel_prior))
+            details.setdefault("channel_outliers", []).append(
+                [names[c] for c in np.flatnonzero(wide > std)])
+        (tp, sp), (tn, sn) = pooled
     return SensorThresholds(names, tp, tn, sp, sn, True,
                             f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
 
@@ -383,30 +409,6 @@ def _compact(counts: np.ndarray) -> np.ndarray:
     if counts.size and int(np.abs(counts).max()) < np.iinfo(np.int16).max:
         return counts.astype(np.int16)
     return counts
-
-
-def shrink_channels(theta: np.ndarray, std: np.ndarray, prior: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per-channel thresholds ``[C]`` pulled toward their precision-weighted common value.
-
-    Each channel's log estimate (relative variance ``(std / theta)^2``) is combined with the
-    inverse-variance-weighted mean of all channels under a prior that the channels of one sensor
-    differ by about ``prior`` (relative std): the posterior mean of a normal model. A channel
-    measured on few usable pixels (a dim blue channel behind a Bayer filter) then borrows from the
-    others instead of standing alone; well-measured channels keep their own value. The pixel
-    circuits behind the filters are the same, so large differences between channels are unlikely.
-    A channel without an uncertainty takes the common value.
-
-    Returns:
-        ``(theta [C], std [C])`` after pooling (the std from the posterior variance).
-    """
-    theta, std = np.asarray(theta, np.float64), np.asarray(std, np.float64)
-    rel = np.where(np.isfinite(std) & (std > 0), std / theta, np.inf)
-    w = 1.0 / rel**2
-    lt = np.log(theta)
-    common = float(np.sum(w * lt) / np.sum(w)) if np.sum(w) > 0 else float(lt.mean())
-    post_w = w + 1.0 / prior**2
-    out = np.exp((w * lt + common / prior**2) / post_w)
-    return out, out / np.sqrt(post_w)
 
 
 def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch: int,

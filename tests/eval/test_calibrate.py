@@ -10,7 +10,8 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, refractory_mask, shrink_channels
+from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, refractory_mask
+from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.events.stats import dead_time_us
 from fusiongs.events.stats import spatial_hot_pixels as hot_pixels
 from fusiongs.events.stream import EventStream
@@ -65,6 +66,8 @@ def test_on_and_off_thresholds_are_recovered_separately(case, request):
     assert np.all((th.theta_neg > th.theta_pos) == (off > on))
     assert np.all(np.isfinite(th.std_pos)) and np.all(th.std_pos > 0)
     assert th.scale_known
+    if len(th.channels) == 3:  # the channels agree here: none is widened as an outlier
+        assert th.details["channel_outliers"] == [[], []]
 
 
 def test_without_frames_only_the_ratio_is_measured(grey_asym):
@@ -179,10 +182,16 @@ def test_gates_named_in_the_details_and_the_own_gate_when_the_neighbours_leave_n
     assert [c["refractory_gate"] for c in used.details["per_channel"]] == ["neighbours"]
     # An uncertainty no fit can meet: every channel is fitted again with the pixel's own gate,
     # and the neighbours' fit is kept in the details.
-    own = estimate_thresholds(sc.frames, sc.events,
-                              CalibrateOptions(bootstrap=50, refractory_max_uncertainty=0.0))
+    own = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
+        bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0))
     ch = own.details["per_channel"][0]
     assert ch["refractory_gate"].startswith("pixel") and ch["neighbour_gate_fit"]["theta_pos"] > 0
+    # ...unless the thresholds spread more than own_gate_max_spread allows: the own gate would
+    # select pixels by their threshold, so the uncertain neighbours' fit is kept as it is
+    kept = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
+        bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=0.5))
+    assert kept.details["per_channel"][0]["refractory_gate"].startswith("neighbours (uncertain")
+    assert np.allclose(kept.theta_pos, used.theta_pos) and np.allclose(kept.theta_neg, used.theta_neg)
     # the own gate leaves out only the fast pixels, not their neighbours: more pairs in the fit
     assert ch["kept"] > used.details["per_channel"][0]["kept"]
     off = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_radius=0, bootstrap=0))
@@ -213,6 +222,25 @@ def test_a_poorly_measured_channel_borrows_from_the_others():
     # no uncertainty at all: the common value
     out3, _ = shrink_channels(np.array([0.2, 0.3]), np.array([np.nan, 0.003]), 0.05)
     assert np.allclose(out3, 0.3, rtol=1e-6)
+
+
+def test_a_channel_that_disagrees_with_the_others_takes_their_value():
+    # blue fitted on few pairs of a dark scene: half the others' value, with a small bootstrap std
+    theta = np.array([0.142, 0.136, 0.072])
+    std = np.array([0.004, 0.005, 0.003])
+    wide = discrepant_channels(theta, std, 0.05, 3.0)
+    assert np.array_equal(wide[:2], std[:2]) and wide[2] > 0.5 * theta[2]
+    out, _ = shrink_channels(theta, wide, 0.05)
+    assert np.allclose(out, 0.139, rtol=0.04)
+    plain, _ = shrink_channels(theta, std, 0.05)
+    assert plain[2] < 0.125  # without the widening the blue channel stays far below
+    # no consensus among the others, two channels, agreeing channels, or k = 0: nothing widened
+    apart = np.array([0.30, 0.36, 0.43])
+    assert np.array_equal(discrepant_channels(apart, np.full(3, 0.001), 0.05, 3.0), np.full(3, 0.001))
+    assert np.array_equal(discrepant_channels(theta[1:], std[1:], 0.05, 3.0), std[1:])
+    close = np.array([0.140, 0.150, 0.145])
+    assert np.array_equal(discrepant_channels(close, np.full(3, 0.005), 0.05, 3.0), np.full(3, 0.005))
+    assert np.array_equal(discrepant_channels(theta, std, 0.05, 0.0), std)
 
 
 def test_hot_pixels_are_spatial_outliers(grey_asym):
