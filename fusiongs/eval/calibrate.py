@@ -368,7 +368,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
             gate = "neighbours (uncertain; the pixel's own gate would select by threshold at this spread)"
         elif gate == "neighbours" and _unreliable(res, opts):
             # A dark scene's events sit on fast edges and every pixel near one is gated: what is
-            # left carries too little signal to measure anything, so the pixel's own gate is used.
+            # left carries too little signal to measure anything, so the pixel's own gate is used
+            # (only at small spread, or when the fit failed: see own_gate_max_spread).
             near = {k: res.get(k) for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")}
             data = prepare_channel(sens, counts, between, sel, fast, frame_ok, events.width,
                                    opts.tile, opts.max_gap, neigh)
@@ -393,13 +394,12 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                                        "factor": fac.tolist()}
     if len(names) > 1 and opts.channel_prior > 0:
         details["per_channel_unpooled"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist()}
-        pooled = []
-        for theta, std in ((tp, sp), (tn, sn)):
-            wide = discrepant_channels(theta, std, opts.channel_prior, opts.channel_outlier)
-            pooled.append(shrink_channels(theta, wide, opts.channel_prior))
-            details.setdefault("channel_outliers", []).append(
-                [names[c] for c in np.flatnonzero(wide > std)])
-        (tp, sp), (tn, sn) = pooled
+        wide_p = discrepant_channels(tp, sp, opts.channel_prior, opts.channel_outlier)
+        wide_n = discrepant_channels(tn, sn, opts.channel_prior, opts.channel_outlier)
+        details["channel_outliers"] = [[names[c] for c in np.flatnonzero(w > s)]
+                                       for w, s in ((wide_p, sp), (wide_n, sn))]
+        tp, sp = shrink_channels(tp, wide_p, opts.channel_prior)
+        tn, sn = shrink_channels(tn, wide_n, opts.channel_prior)
     return SensorThresholds(names, tp, tn, sp, sn, True,
                             f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
 
