@@ -41,8 +41,11 @@ the two halves of the recording) and the estimate multiplied by that factor, per
 
 Without frames only the ON/OFF ratio is observable: over a recording the log intensities a sensor
 sees end about where they started on average over pixels, so ``theta_- / theta_+ = sum N_+ /
-sum N_-`` (per channel, hot pixels left out); the common scale is then an assumption. With a single
-frame the scale comes from the EDI sharpness estimate of that frame (:func:`estimate_theta`).
+sum N_-`` (per channel, hot pixels left out); the common scale is then an assumption. A single
+frame does not make it observable either: the EDI sharpness criterion of one frame
+(:func:`fusiongs.eval.edi.estimate_theta`, Pan et al. CVPR 2019) rises with the threshold on the
+sweep's scenes and picked the largest candidate on 12 of 14 tuning scenes (1.5-5x the truth;
+benchmarks/RESULTS.md, session 16), so one frame is treated as none for the scale.
 """
 
 from __future__ import annotations
@@ -300,8 +303,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
 
     Args:
         frames: the scene's frames (possibly blurry; any response, linearised here). Two or more
-            give the consistency estimate; one gives a sharpness estimate of the scale; none gives
-            only the ON/OFF ratio (``scale_known`` False).
+            give the consistency estimate; one or none give only the ON/OFF ratio
+            (``scale_known`` False, the scale ``opts.unknown_scale``).
         events: the time-sorted stream of the same pixel grid.
         opts: settings (:class:`CalibrateOptions`).
 
@@ -432,18 +435,20 @@ def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch:
 
 def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...], ratio: list[dict],
                    opts: CalibrateOptions, details: dict) -> SensorThresholds:
-    """One frame: scale from the frame's EDI sharpness; no frame: scale assumed. Ratio from balance."""
+    """Fewer than two frames: the ON/OFF ratio from the event balance, the common scale assumed.
+
+    One frame's EDI sharpness estimate of the scale (:func:`estimate_theta`) is recorded in the
+    details (``single_frame_sharpness``) but not used: it is not reliable (module docstring)."""
     rho = np.array([r["ratio"] for r in ratio])
     rho_sd = np.array([r["std"] for r in ratio])
     if not np.all(np.isfinite(rho) & (rho > 0)):
         raise InputError("calibrate", "events", "both ON and OFF events on every channel", rho.tolist())
+    scale, known = opts.unknown_scale, False
+    method = "event balance (ON/OFF ratio only; common scale assumed)"
     if len(frames) == 1:
-        scale = estimate_theta(frames.to_linear()[0], events, float(frames.t_start[0]),
-                               float(frames.t_end[0]))
-        method, known = "single-frame EDI sharpness (scale) + event balance (ON/OFF ratio)", True
-    else:
-        scale = opts.unknown_scale
-        method, known = "event balance (ON/OFF ratio only; common scale assumed)", False
+        method = "one frame: " + method
+        details["single_frame_sharpness"] = estimate_theta(
+            frames.to_linear()[0], events, float(frames.t_start[0]), float(frames.t_end[0]))
     tp, tn = scale / np.sqrt(rho), scale * np.sqrt(rho)
     sd_rel = 0.5 * rho_sd / rho
     details.update({"assumed_scale": None if known else scale})

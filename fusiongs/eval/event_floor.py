@@ -15,14 +15,16 @@ import numpy as np
 
 def _fitted_at_instants(scene_path: str | Path, image_at) -> dict[str, float]:
     """Affine-fit PSNR / SSIM, averaged over the scene's requested instants, of ``image_at(scene,
-    names, times)`` (sRGB ``[K, H, W, 3]`` in [0, 1], one per instant) against ``SCENE/gt/NAME.png``."""
+    names, times)`` (sRGB ``[K, H, W, 3]`` in [0, 1], one per instant) against ``SCENE/gt/NAME.png``;
+    the instants in time order (a scene with frames lists its deblur views first)."""
     from fusiongs.eval.metrics import image_metrics
     from fusiongs.frames.image_io import read_image
     from fusiongs.io.scene_io import load_scene
 
     scene = load_scene(scene_path)
-    names = [r.name for r in scene.renders]
-    times = np.array([r.t for r in scene.renders])
+    views = sorted(scene.renders, key=lambda r: r.t)
+    names = [r.name for r in views]
+    times = np.array([r.t for r in views])
     truth = [read_image(Path(scene_path) / "gt" / f"{name}.png") for name in names]
     out = [image_metrics(img, gt, affine=True, delta_e=False)
            for img, gt in zip(image_at(scene, truth, times), truth)]

@@ -79,12 +79,19 @@ def test_without_frames_only_the_ratio_is_measured(grey_asym):
     assert abs(ratio[0] / (0.35 / 0.2) - 1) < 0.25, ratio
 
 
-def test_one_frame_gives_a_scale_from_sharpness(grey_asym):
+def test_one_frame_measures_the_ratio_and_assumes_the_scale(grey_asym):
+    """One frame does not fix the scale (its EDI sharpness estimate is only recorded): the result
+    is that of no frames, the assumed scale with the events' ON/OFF ratio, and says so."""
     fs = grey_asym.scene.frames
+    ev = grey_asym.scene.events
     one = FrameSet(fs.images[:1], fs.t_start[:1], fs.t_end[:1], fs.names[:1], fs.response)
-    th = estimate_thresholds(one, grey_asym.scene.events)
-    assert th.scale_known and "single-frame" in th.method
-    assert 0.05 < th.pair()[0] < 1.0
+    opts = CalibrateOptions(unknown_scale=0.3)
+    th = estimate_thresholds(one, ev, opts)
+    assert not th.scale_known and th.method.startswith("one frame") and "assumed" in th.method
+    assert 0.02 <= th.details["single_frame_sharpness"] <= 0.8
+    none = estimate_thresholds(FrameSet.empty(ev.height, ev.width), ev, opts)
+    np.testing.assert_allclose(th.theta_pos, none.theta_pos)
+    np.testing.assert_allclose(th.theta_neg, none.theta_neg)
 
 
 def test_no_events_is_a_named_error(grey_asym):
@@ -321,7 +328,8 @@ def test_cli_bad_input_is_one_line_exit_2(grey_asym, tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code == 2 and "events" in err and len(err.splitlines()) == 1
     assert main(["calibrate", str(_scene_dir(tmp_path, one, "one")), "-o", str(tmp_path / "o.json")]) == 0
-    assert "single-frame" in read_calibration(tmp_path / "o.json")[0].method
+    assert read_calibration(tmp_path / "o.json")[0].method.startswith("one frame")
+    assert "common scale" in capsys.readouterr().err
     nof = _scene_dir(tmp_path, no_frames, "nof")
     assert main(["calibrate", str(nof), "-o", str(tmp_path / "n.json")]) == 0
     captured = capsys.readouterr()
