@@ -39,3 +39,16 @@ def test_the_grey_ceiling_binds_on_colour_truth_and_not_on_grey_truth(colour_wal
         img = read_image(png)
         write_png(png, np.repeat(img.mean(axis=-1, keepdims=True), 3, axis=-1))
     assert grey_ceiling(grey)["psnr"] > 45.0  # a grey truth is its own luminance up to rounding
+
+
+def test_the_floor_of_a_scene_with_a_frame_takes_its_instants_in_time_order(tmp_path):
+    """A scene with frames lists its deblur views before the novel ones (out of time order); the
+    high-pass filter reads out in time order, so the floor sorts the instants first."""
+    cfg = SimConfig(preset="wall", width=32, height=24, duration=0.15, frames=1, novel=2,
+                    dvs_rate_hz=600.0, blur_samples=4, supersample=1, seed=4)
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, tmp_path, overwrite=True)
+    times = [r.t for r in res.scene.renders]
+    assert times != sorted(times)  # the case this test is about
+    floor = leaky_integrator_floor(tmp_path)
+    assert 8.0 < floor["psnr"] < 40.0
