@@ -43,7 +43,7 @@ from fusiongs.train.data import (
 from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
-from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, scene_extent
+from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, event_stereo_start, scene_extent
 from fusiongs.train.step import training_step
 from fusiongs.train.truth_probe import probe_psnr, should_probe, truth_probe
 
@@ -280,7 +280,7 @@ def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tenso
     the random initialisation."""
     if cfg.init.method == "random":
         return None
-    if data.n_frames == 0:
+    if event_stereo_start(data, cfg):
         if data.events is None or not len(data.events):
             return None
         return event_stereo_images(data.events, data.t_range, EVENT_ONLY_VIEWS, cfg.event_only.intensity_tau,

@@ -71,3 +71,34 @@ def test_random_initialisation_without_frames_uses_no_images(wall_events):
     model, _ = initial_gaussians(data, c2w, cfg, torch.Generator().manual_seed(0), None)
     zm = model.means[:, 2].detach().numpy()
     assert np.mean((zm > 2.6) & (zm < 6.2)) < 0.3  # the contrast the stereo test above relies on
+
+
+def test_a_single_frame_starts_from_the_events_stereo_and_two_frames_from_the_frames(tmp_path):
+    """One frame cannot be matched against another, so a one-frame scene starts like an event-only
+    one (the events' HPF images at EVENT_ONLY_VIEWS instants, posed over the whole recording);
+    with two frames the EDI frames are matched; ``init.method=random`` uses no images."""
+    from fusiongs.train.state import build_state, event_stereo_start
+
+    def scene(frames):
+        cfg = SimConfig(preset="wall", width=48, height=36, duration=0.3, frames=frames, novel=0,
+                        dvs_rate_hz=600.0, blur_samples=4, supersample=1, seed=2)
+        res = run_simulation(cfg)
+        root = tmp_path / f"f{frames}"
+        write_simulated_scene(res.scene, res.gt, root, overwrite=True)
+        return load_scene(root)
+
+    cfg = resolve_config("event_only", [])
+    one = scene(1)
+    data = prepare_data(one, torch.device("cpu"), True)
+    assert event_stereo_start(data, cfg)
+    images = init_images(one, data, cfg)
+    assert images is not None and images.shape[0] == EVENT_ONLY_VIEWS
+    traj = build_trajectory(one, cfg, torch.device("cpu"))
+    state = build_state(data, None, traj, cfg, torch.device("cpu"), init_images=images)
+    zm = state.model.means[:, 2].detach().numpy()
+    assert np.mean((zm > 2.6) & (zm < 6.2)) > 0.5  # on the surfaces, as without frames
+    assert not event_stereo_start(data, resolve_config("event_only", ["init.method=random"]))
+    two = scene(2)
+    data2 = prepare_data(two, torch.device("cpu"), True)
+    assert not event_stereo_start(data2, cfg)
+    assert init_images(two, data2, cfg).shape[0] == 2
