@@ -44,7 +44,7 @@ sees end about where they started on average over pixels, so ``theta_- / theta_+
 sum N_-`` (per channel, hot pixels left out); the common scale is then an assumption. A single
 frame does not make it observable either: the EDI sharpness criterion of one frame
 (:func:`fusiongs.eval.edi.estimate_theta`, Pan et al. CVPR 2019) rises with the threshold on the
-sweep's scenes and picked the largest candidate on 12 of 14 tuning scenes (1.5-5x the truth;
+sweep's scenes and picked the largest candidate on 13 of 16 tuning scenes (1.5-5.3x the truth;
 benchmarks/RESULTS.md, session 16), so one frame is treated as none for the scale.
 """
 
@@ -443,7 +443,7 @@ def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...]
     rho_sd = np.array([r["std"] for r in ratio])
     if not np.all(np.isfinite(rho) & (rho > 0)):
         raise InputError("calibrate", "events", "both ON and OFF events on every channel", rho.tolist())
-    scale, known = opts.unknown_scale, False
+    scale = opts.unknown_scale
     method = "event balance (ON/OFF ratio only; common scale assumed)"
     if len(frames) == 1:
         method = "one frame: " + method
@@ -451,5 +451,5 @@ def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...]
             frames.to_linear()[0], events, float(frames.t_start[0]), float(frames.t_end[0]))
     tp, tn = scale / np.sqrt(rho), scale * np.sqrt(rho)
     sd_rel = 0.5 * rho_sd / rho
-    details.update({"assumed_scale": None if known else scale})
-    return SensorThresholds(names, tp, tn, tp * sd_rel, tn * sd_rel, known, method, details)
+    details["assumed_scale"] = scale
+    return SensorThresholds(names, tp, tn, tp * sd_rel, tn * sd_rel, False, method, details)

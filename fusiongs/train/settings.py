@@ -25,7 +25,8 @@ def _need_positive(section: str, obj: object, names: tuple[str, ...], zero_ok: b
 @dataclass
 class InitSettings:
     # stereo: plane sweep on the EDI frames (or the frames without events) plus random points;
-    # auto: stereo with >= 2 frames, else random (event-only scenes, a single frame)
+    # auto: stereo on the frames with >= 2 frames; with events and fewer frames (none or one),
+    # stereo on the events' high-pass images; random otherwise
     method: Literal["auto", "random", "stereo"] = "auto"
     n_points: int = 15000            # initial Gaussians (stereo points plus random ones in the frusta)
     depth_min: float = 1.0           # near bound of the sampled depths (scene units)
