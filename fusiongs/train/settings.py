@@ -117,7 +117,7 @@ class ThresholdSettings:
     estimate: bool = True            # start from the EDI consecutive-frame estimate (needs >= 2 frames)
     learn: bool = True               # learn θ after the warm-up
     lr: float = 1e-4                 # Adam lr of log θ; larger rates drift below the truth (RESULTS.md)
-    regularise: float = 0.0          # weight of the pull toward the initial θ (event-only mode)
+    regularise: float = 0.0          # weight of the pull toward the initial θ (scenes without frames only)
     grid: tuple[int, int] | None = None  # (gh, gw) spatial θ field over the sensor; None = scalar
     time_knots: int = 0              # knots of a slow θ drift over the recording (0 = none, else >= 2)
     smoothness: float = 1.0          # weight of the field / drift smoothness regulariser

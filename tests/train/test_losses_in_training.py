@@ -120,3 +120,22 @@ def test_censored_counts_train_on_a_refractory_sensor(tmp_path):
                               maximum_filter(ref, size=3, mode="constant"))
     off = resolve_config(None, BASE + ["events.censor=0", "threshold.estimate=false"])
     assert train(scene(2e-3, None), off, tmp_path / "off").data.fast is None
+
+
+def test_threshold_pull_is_for_scenes_without_frames_only():
+    """``threshold.regularise`` pulls θ toward its start only when no frame fixes its scale: with a
+    frame in the scene the same θ offset costs nothing (session 17: the pull held one-frame scenes
+    at an assumed scale 26-44 % off)."""
+    from types import SimpleNamespace
+
+    from fusiongs.losses.threshold import ContrastThreshold
+    from fusiongs.train.trainer import _regularisers
+
+    ct = ContrastThreshold(channels=3, init=(0.2, 0.25))
+    with torch.no_grad():
+        ct.log_theta.add_(0.1)
+    state = SimpleNamespace(threshold=ct, log_gain=torch.zeros(3))
+    cfg = resolve_config("event_only", [])
+    assert cfg.threshold.regularise > 0
+    assert _regularisers(state, cfg, n_frames=0).item() == pytest.approx(cfg.threshold.regularise * 6 * 0.01)
+    assert _regularisers(state, cfg, n_frames=1).item() == 0.0
