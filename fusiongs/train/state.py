@@ -157,10 +157,8 @@ def event_stereo_start(data: TrainData, cfg: DeblurConfig) -> bool:
     :data:`EVENT_ONLY_VIEWS` instants over the recording: without frames, and with a single frame
     under ``init.method = "auto"`` (one frame cannot be matched against another; without this the
     start would be random points, which the frame alone then flattens into its own view)."""
-    if data.n_frames == 0:
-        return True
-    return (data.n_frames == 1 and cfg.init.method == "auto" and data.events is not None
-            and len(data.events) > 0)
+    return data.n_frames == 0 or (data.n_frames == 1 and cfg.init.method == "auto"
+                                  and data.events is not None and len(data.events) > 0)
 
 
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
@@ -177,7 +175,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
     # on the host on purpose: the same initial Gaussians on every device (drawn points are moved
     # to the device by initial_gaussians)
     gen = torch.Generator(device="cpu").manual_seed(cfg.seed)
-    if data.n_frames and not event_stereo_start(data, cfg):
+    if not event_stereo_start(data, cfg):
         t_init = data.exposures.mean(dim=1)
     else:
         t_init = torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64,

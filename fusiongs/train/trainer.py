@@ -275,9 +275,9 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
 
 def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
     """Images the stereo initialisation matches: the EDI frames when there are events, else the
-    (blurry) frames in linear light; without frames the HPF images of the events at the instants
-    the first Gaussians are posed at (:func:`fusiongs.train.data.event_stereo_images`); None for
-    the random initialisation."""
+    (blurry) frames in linear light; without frames, or with one frame (:func:`event_stereo_start`),
+    the HPF images of the events at the instants the first Gaussians are posed at
+    (:func:`fusiongs.train.data.event_stereo_images`); None for the random initialisation."""
     if cfg.init.method == "random":
         return None
     if event_stereo_start(data, cfg):
