@@ -43,6 +43,11 @@ class InitSettings:
     stereo_min_confidence: float = 0.3  # drop pixels whose cost curve is flatter than this
     stereo_max_width: int = 400      # frames wider than this are block-averaged by the least integer
                                      # factor that brings them under it before the sweep (0: never)
+    # colour of the first Gaussians of a one-frame scene started from the events' stereo: the
+    # frame's mean linear colour (the HPF points around it), with the colour learning rates scaled
+    # by its mean level / 0.5 so that a step changes log intensity as much as from grey; or grey
+    # (0.5 linear, before session 18). Chosen on one-frame tuning seeds 7, 3, 8, 6 (RESULTS.md)
+    start_colour: Literal["frame", "grey"] = "frame"
 
     def __post_init__(self) -> None:
         if not 0 <= self.stereo_share <= 1:

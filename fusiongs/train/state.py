@@ -75,7 +75,8 @@ def stereo_factor(width: int, max_width: int) -> int:
 
 
 def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen: torch.Generator,
-                      images: torch.Tensor | None = None) -> tuple[GaussianModel, float]:
+                      images: torch.Tensor | None = None, fill: torch.Tensor | None = None
+                      ) -> tuple[GaussianModel, float]:
     """The initial Gaussians (``cfg.init``): random in the frusta, or stereo points plus random ones.
 
     Points are drawn on ``gen``'s device and returned on ``c2w``'s (the trainer's ``gen`` is on
@@ -85,7 +86,8 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     ``"stereo"`` plane-sweeps ``images`` (``[F, H, W, C]`` linear, e.g. EDI frames, posed by ``c2w``
     ``[F, 4, 4]``; :func:`fusiongs.camera.stereo.stereo_points`), keeps at most
     ``stereo_share · n_points`` of the confident surface points, drawn uniformly, coloured by their
-    pixel, and fills the rest of ``n_points`` with grey random points (untextured or unseen parts).
+    pixel, and fills the rest of ``n_points`` with random points of colour ``fill`` (``[3]`` linear,
+    grey 0.5 when None: untextured or unseen parts).
     With ``init.far_from_stereo`` a first sweep reaches ``STEREO_FAR_FACTOR · depth_min`` (planes
     are uniform in inverse depth, so this costs little resolution near the camera) and the far
     bound becomes :func:`fusiongs.camera.stereo.far_bound` of its points, at least ``depth_max``.
@@ -147,7 +149,8 @@ def initial_gaussians(data: TrainData, c2w: torch.Tensor, cfg: DeblurConfig, gen
     rand = sample_in_frusta(data.camera, c2w.cpu(), ini.n_points - n_stereo, ini.depth_min,
                             far, gen, ini.depth_sampling).float()
     xyz = torch.cat([xyz[pick], rand]).to(c2w.device)
-    rgb = torch.cat([rgb, torch.full_like(rand, 0.5)]).to(c2w.device)
+    fill = rand.new_full((3,), 0.5) if fill is None else fill.detach().to(rand)
+    rgb = torch.cat([rgb, fill.expand_as(rand)]).to(c2w.device)
     return GaussianModel.from_points(xyz, rgb, ini.sh_degree, init_opacity=ini.opacity,
                                      where="stereo init"), far
 
@@ -162,14 +165,15 @@ def event_stereo_start(data: TrainData, cfg: DeblurConfig) -> bool:
 
 
 def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, cfg: DeblurConfig,
-                device: torch.device, theta_init=None,
-                init_images: torch.Tensor | None = None) -> FusionState:
+                device: torch.device, theta_init=None, init_images: torch.Tensor | None = None,
+                fill: torch.Tensor | None = None) -> FusionState:
     """Initial state: Gaussians from :func:`initial_gaussians` with the cameras at the frame times.
 
     Args:
         theta_init: starting contrast thresholds (a float, an ON/OFF pair or ``[2, C]``);
             ``cfg.threshold.init`` when None.
         init_images: ``[F, H, W, C]`` linear images for ``init.method = "stereo"``.
+        fill: ``[3]`` linear colour of the random points (:func:`initial_gaussians`).
     """
     theta_init = cfg.threshold.init if theta_init is None else theta_init
     # on the host on purpose: the same initial Gaussians on every device (drawn points are moved
@@ -182,7 +186,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
                                 device=device)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
-    model, far = initial_gaussians(data, c2w, cfg, gen, init_images)
+    model, far = initial_gaussians(data, c2w, cfg, gen, init_images, fill)
     channels = 3 if data.cfa_index is not None else 1
     init = np.asarray(theta_init, dtype=np.float64)
     if init.ndim == 2 and init.shape[1] != channels:  # per-channel values for a per-channel model only

@@ -68,10 +68,19 @@ def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
                          max_gaussians=d.max_gaussians)
 
 
-def _optimizers(state: FusionState, cfg: DeblurConfig, extent: float) -> dict[str, torch.optim.Optimizer]:
+def colour_lr_scale(fill: torch.Tensor | None) -> float:
+    """The colour learning rates' factor for a start at ``fill`` (``[3]`` linear; 1 for grey 0.5):
+    its mean level / 0.5, so that an Adam step (a fixed change of linear colour) changes log
+    intensity, where the event loss acts, as much as from the grey start."""
+    return 1.0 if fill is None else float(fill.mean()) / 0.5
+
+
+def _optimizers(state: FusionState, cfg: DeblurConfig, extent: float,
+                colour_scale: float = 1.0) -> dict[str, torch.optim.Optimizer]:
     o = cfg.optim
+    lr_colors = o.lr_colors * colour_scale
     lr = GaussianLR(means=o.lr_means, log_scales=o.lr_scales, quats=o.lr_quats,
-                    opacity_logits=o.lr_opacities, sh0=o.lr_colors, shN=o.lr_colors / 20)
+                    opacity_logits=o.lr_opacities, sh0=lr_colors, shN=lr_colors / 20)
     opts: dict[str, torch.optim.Optimizer] = {"gaussians": make_optimizer(state.model, lr, extent)}
     opts["threshold"] = torch.optim.Adam(state.threshold.parameters(), lr=cfg.threshold.lr)
     if state.trajectory.delta is not None:
@@ -171,8 +180,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
+    fill = frame_colour(scene, data, cfg)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
-                        init_images(scene, data, cfg))
+                        init_images(scene, data, cfg, fill), fill)
     extent = scene_extent(scene.poses.c2w, state.depth_far)
     start, history = 0, History()
     # the frame order is the first draw of `gen`, made before a checkpoint replaces its state: a
@@ -183,7 +193,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
     psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
     if ckpt is None:
-        opts = _optimizers(state, cfg, extent)
+        opts = _optimizers(state, cfg, extent, colour_lr_scale(fill))
     else:
         with checkpoint_errors(ckpt_path):  # a foreign or edited checkpoint: one line, not a trace
             _restore(ckpt, state)
@@ -193,7 +203,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             saved = ckpt.get("device_generator", {})
             if saved.get("device") == device_gen.device.type:  # else (another device) freshly seeded
                 device_gen.set_state(saved["state"])
-            opts = _optimizers(state, cfg, extent)
+            opts = _optimizers(state, cfg, extent, colour_lr_scale(fill))
             for k, o in opts.items():
                 if k in ckpt.get("optimizers", {}):
                     o.load_state_dict(ckpt["optimizers"][k])
@@ -273,18 +283,36 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
                         cfg.threshold.init, device)
 
 
-def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
+def frame_colour(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
+    """``[3]`` float32 linear: the mean colour of a one-frame scene's frame, which the first
+    Gaussians start from when they come from the events (:func:`event_stereo_start`) and
+    ``init.start_colour`` is ``"frame"``; None otherwise (grey 0.5).
+
+    Grey events carry no colour and the band loss no level, so what the frame never saw keeps the
+    colour it started with: the frame's mean is a measured guess, not an assumed grey.
+    """
+    if cfg.init.start_colour != "frame" or data.n_frames == 0 or not event_stereo_start(data, cfg):
+        return None
+    lin = np.asarray(scene.frames.to_linear(), dtype=np.float64)  # [F, H, W, C]
+    mean = torch.from_numpy(lin.reshape(-1, lin.shape[-1]).mean(axis=0)).float()
+    return mean.expand(3).clone() if mean.numel() == 1 else mean
+
+
+def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig,
+                fill: torch.Tensor | None = None) -> torch.Tensor | None:
     """Images the stereo initialisation matches: the EDI frames when there are events, else the
     (blurry) frames in linear light; without frames, or with one frame (:func:`event_stereo_start`),
     the HPF images of the events at the instants the first Gaussians are posed at
-    (:func:`fusiongs.train.data.event_stereo_images`); None for the random initialisation."""
+    (:func:`fusiongs.train.data.event_stereo_images`), tinted to ``fill`` (``[3]`` linear, the
+    level their ``exp(V) = 1`` maps to; grey 0.5 when None); None for the random initialisation."""
     if cfg.init.method == "random":
         return None
     if event_stereo_start(data, cfg):
         if data.events is None or not len(data.events):
             return None
-        return event_stereo_images(data.events, data.t_range, EVENT_ONLY_VIEWS, cfg.event_only.intensity_tau,
-                                   cfg.threshold.init, data.cfa_index is not None)
+        hpf = event_stereo_images(data.events, data.t_range, EVENT_ONLY_VIEWS, cfg.event_only.intensity_tau,
+                                  cfg.threshold.init, data.cfa_index is not None)
+        return hpf if fill is None else (hpf * (fill / 0.5)).clamp(0.0, 1.0)
     if data.edi is not None:
         return data.edi
     return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))

@@ -13,7 +13,7 @@ from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.data import event_stereo_images, prepare_data
 from fusiongs.train.pipeline import resolve_config
 from fusiongs.train.state import EVENT_ONLY_VIEWS, initial_gaussians
-from fusiongs.train.trainer import build_trajectory, init_images
+from fusiongs.train.trainer import build_trajectory, frame_colour, init_images
 
 
 @pytest.fixture(scope="module", params=[None, "RGGB"], ids=["grey", "rggb"])
@@ -102,3 +102,46 @@ def test_a_single_frame_starts_from_the_events_stereo_and_two_frames_from_the_fr
     data2 = prepare_data(two, torch.device("cpu"), True)
     assert not event_stereo_start(data2, cfg)
     assert init_images(two, data2, cfg).shape[0] == 2
+    # the stereo points have the EDI frames' colours
+    assert frame_colour(two, data2, resolve_config("event_only", ["init.start_colour=frame"])) is None
+
+
+def test_a_single_frame_gives_the_first_gaussians_its_mean_colour(tmp_path):
+    """Grey events carry no colour and the band loss no level: a one-frame scene's first Gaussians
+    start from the frame's mean linear colour (``init.start_colour=frame``, the default: random
+    points exactly, the HPF-stereo points scaled to it, colour learning rates scaled by its level)
+    instead of grey 0.5. Without frames, or with two, nothing changes."""
+    from fusiongs.train.state import build_state
+    from fusiongs.train.trainer import _optimizers, colour_lr_scale
+
+    cfg_sim = SimConfig(preset="gallery", width=48, height=36, duration=0.3, frames=1, novel=0,
+                        dvs_rate_hz=600.0, blur_samples=4, supersample=1, seed=3)
+    res = run_simulation(cfg_sim)
+    write_simulated_scene(res.scene, res.gt, tmp_path / "one", overwrite=True)
+    one = load_scene(tmp_path / "one")
+    data = prepare_data(one, torch.device("cpu"), True)
+    assert frame_colour(one, data, resolve_config("event_only", ["init.start_colour=grey"])) is None
+    cfg = resolve_config("event_only", [])  # the default: the frame's colour
+    fill = frame_colour(one, data, cfg)
+    want = np.asarray(one.frames.to_linear(), np.float64).reshape(-1, 3).mean(axis=0)
+    assert fill is not None and fill.shape == (3,) and fill.dtype == torch.float32
+    np.testing.assert_allclose(fill.numpy(), want, rtol=1e-5)
+    assert float(np.ptp(want)) > 0.1 * float(want.mean()) and abs(float(want.mean()) - 0.5) > 0.05  # not grey
+    traj = build_trajectory(one, cfg, torch.device("cpu"))
+    grey = build_state(data, None, traj, cfg, torch.device("cpu"), init_images=init_images(one, data, cfg))
+    tinted = build_state(data, None, traj, cfg, torch.device("cpu"),
+                         init_images=init_images(one, data, cfg, fill), fill=fill)
+    c_grey = grey.model.base_colors().detach()
+    c = tinted.model.base_colors().detach()
+    n_rand = cfg.init.n_points - int(round(cfg.init.stereo_share * cfg.init.n_points))
+    torch.testing.assert_close(c[-n_rand:], fill.expand(n_rand, 3), rtol=1e-5, atol=1e-6)  # the random share
+    torch.testing.assert_close(c_grey[-n_rand:], torch.full((n_rand, 3), 0.5), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(c.mean(0).numpy(), want, rtol=0.15)  # the stereo points too, on average
+    assert frame_colour(one, data, resolve_config("event_only", ["init.method=random",
+                                                                 "init.start_colour=frame"])) is None
+    # an Adam step changes log intensity as much as from grey: the colour rates scale with the level
+    assert colour_lr_scale(None) == 1.0
+    scale = colour_lr_scale(fill)
+    assert scale == pytest.approx(float(want.mean()) / 0.5, rel=1e-5)
+    lrs = {g["name"]: g["lr"] for g in _optimizers(tinted, cfg, 10.0, scale)["gaussians"].param_groups}
+    assert lrs["sh0"] == pytest.approx(cfg.optim.lr_colors * scale)
