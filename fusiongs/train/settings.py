@@ -46,8 +46,10 @@ class InitSettings:
     # colour of the first Gaussians of a one-frame scene started from the events' stereo: the
     # frame's mean linear colour (the HPF points around it), with the colour learning rates scaled
     # by its mean level / 0.5 so that a step changes log intensity as much as from grey; or grey
-    # (0.5 linear, before session 18). Chosen on one-frame tuning seeds 7, 3, 8, 6 (RESULTS.md)
-    start_colour: Literal["frame", "grey"] = "frame"
+    # (0.5 linear, before session 18); auto: the frame's for grey events (which carry no colour),
+    # grey for colour events (the frame's start cost the dark RGGB scenes 1.5-3 dB). Chosen on
+    # one-frame tuning seeds 7, 3, 8, 6, 5, 17 (RESULTS.md, sessions 18-19)
+    start_colour: Literal["auto", "frame", "grey"] = "auto"
 
     def __post_init__(self) -> None:
         if not 0 <= self.stereo_share <= 1:

@@ -286,12 +286,18 @@ def pvc_readouts_for(data: TrainData, cfg: DeblurConfig, device: torch.device
 def frame_colour(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tensor | None:
     """``[3]`` float32 linear: the mean colour of a one-frame scene's frame, which the first
     Gaussians start from when they come from the events (:func:`event_stereo_start`) and
-    ``init.start_colour`` is ``"frame"``; None otherwise (grey 0.5).
+    ``init.start_colour`` is ``"frame"``, or ``"auto"`` with grey events; None otherwise (grey 0.5).
 
     Grey events carry no colour and the band loss no level, so what the frame never saw keeps the
-    colour it started with: the frame's mean is a measured guess, not an assumed grey.
+    colour it started with: the frame's mean is a measured guess, not an assumed grey. Colour
+    events see each channel's changes, and there the near-black mean of a mostly unlit frame (with
+    the colour rates scaled to it) kept the lit objects too dark: on the one-frame `dark` RGGB
+    scenes the grey start scored 1.5-3 dB higher (benchmarks/RESULTS.md, session 19).
     """
-    if cfg.init.start_colour != "frame" or data.n_frames == 0 or not event_stereo_start(data, cfg):
+    mode = cfg.init.start_colour
+    if mode == "auto":
+        mode = "grey" if data.cfa_index is not None else "frame"
+    if mode != "frame" or data.n_frames == 0 or not event_stereo_start(data, cfg):
         return None
     lin = np.asarray(scene.frames.to_linear(), dtype=np.float64)  # [F, H, W, C]
     mean = torch.from_numpy(lin.reshape(-1, lin.shape[-1]).mean(axis=0)).float()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -108,10 +110,11 @@ def test_a_single_frame_starts_from_the_events_stereo_and_two_frames_from_the_fr
 
 def test_a_single_frame_gives_the_first_gaussians_its_mean_colour(tmp_path):
     """Grey events carry no colour and the band loss no level: a one-frame scene's first Gaussians
-    start from the frame's mean linear colour (``init.start_colour=frame``, the default: random
-    points exactly, the HPF-stereo points scaled to it, colour learning rates scaled by its level)
-    instead of grey 0.5. Without frames, or with two, nothing changes."""
-    from fusiongs.train.state import build_state
+    start from the frame's mean linear colour (``init.start_colour=auto``, the default, with grey
+    events: random points exactly, the HPF-stereo points scaled to it, colour learning rates scaled
+    by its level) instead of grey 0.5; colour events start grey. Without frames, or with two,
+    nothing changes."""
+    from fusiongs.train.state import build_state, event_stereo_start
     from fusiongs.train.trainer import _optimizers, colour_lr_scale
 
     cfg_sim = SimConfig(preset="gallery", width=48, height=36, duration=0.3, frames=1, novel=0,
@@ -145,3 +148,12 @@ def test_a_single_frame_gives_the_first_gaussians_its_mean_colour(tmp_path):
     assert scale == pytest.approx(float(want.mean()) / 0.5, rel=1e-5)
     lrs = {g["name"]: g["lr"] for g in _optimizers(tinted, cfg, 10.0, scale)["gaussians"].param_groups}
     assert lrs["sh0"] == pytest.approx(cfg.optim.lr_colors * scale)
+    # colour events see each channel's changes: auto (the default) starts them grey, frame forces it
+    rggb = run_simulation(replace(cfg_sim, cfa="RGGB"))
+    write_simulated_scene(rggb.scene, rggb.gt, tmp_path / "rggb", overwrite=True)
+    one_c = load_scene(tmp_path / "rggb")
+    data_c = prepare_data(one_c, torch.device("cpu"), True)
+    assert data_c.cfa_index is not None and event_stereo_start(data_c, cfg)
+    assert frame_colour(one_c, data_c, cfg) is None
+    forced = frame_colour(one_c, data_c, resolve_config("event_only", ["init.start_colour=frame"]))
+    assert forced is not None and forced.shape == (3,)
