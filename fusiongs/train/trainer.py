@@ -181,6 +181,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg, device)
     fill = frame_colour(scene, data, cfg)
+    colour_scale = colour_lr_scale(fill)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg, fill), fill)
     extent = scene_extent(scene.poses.c2w, state.depth_far)
@@ -193,7 +194,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     strategy = DensifyStrategy(_densify_config(cfg), extent, seed=cfg.seed)
     psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
     if ckpt is None:
-        opts = _optimizers(state, cfg, extent, colour_lr_scale(fill))
+        opts = _optimizers(state, cfg, extent, colour_scale)
     else:
         with checkpoint_errors(ckpt_path):  # a foreign or edited checkpoint: one line, not a trace
             _restore(ckpt, state)
@@ -203,7 +204,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             saved = ckpt.get("device_generator", {})
             if saved.get("device") == device_gen.device.type:  # else (another device) freshly seeded
                 device_gen.set_state(saved["state"])
-            opts = _optimizers(state, cfg, extent, colour_lr_scale(fill))
+            opts = _optimizers(state, cfg, extent, colour_scale)
             for k, o in opts.items():
                 if k in ckpt.get("optimizers", {}):
                     o.load_state_dict(ckpt["optimizers"][k])
@@ -318,7 +319,7 @@ def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig,
             return None
         hpf = event_stereo_images(data.events, data.t_range, EVENT_ONLY_VIEWS, cfg.event_only.intensity_tau,
                                   cfg.threshold.init, data.cfa_index is not None)
-        return hpf if fill is None else (hpf * (fill / 0.5)).clamp(0.0, 1.0)
+        return hpf if fill is None else (hpf * (fill.to(hpf) / 0.5)).clamp(0.0, 1.0)
     if data.edi is not None:
         return data.edi
     return torch.from_numpy(np.ascontiguousarray(scene.frames.to_linear(), dtype=np.float32))
