@@ -102,6 +102,20 @@ def _set_learning_rates(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfi
             g["lr"] = log_linear_lr(max(it - o.pose_start, 0), o.lr_pose, o.lr_pose_final, span)
 
 
+def training_device(name: str) -> torch.device:
+    """``torch.device(name)`` with the card named: ``"cuda"`` becomes ``cuda:<current device>``.
+
+    Tensors made on ``"cuda"`` land on the current card and report ``cuda:0`` (say), while a
+    ``torch.Generator(device="cuda")`` reports plain ``cuda``; naming the index once makes every
+    tensor, generator and comparison of devices in the run agree (found by the CUDA half of
+    tests/train/test_device_clean.py on an H200).
+    """
+    device = torch.device(name)
+    if device.type == "cuda" and device.index is None:
+        device = torch.device("cuda", torch.cuda.current_device())
+    return device
+
+
 def build_trajectory(scene: Scene, cfg: DeblurConfig, device: torch.device) -> Trajectory:
     """The scene's poses as a refinable trajectory (clamped outside its time range)."""
     return Trajectory(scene.poses, mode=cfg.trajectory, refine=cfg.optim.refine_poses,
@@ -158,7 +172,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     """
     from tqdm import tqdm
 
-    device = torch.device(cfg.device)
+    device = training_device(cfg.device)
     torch.manual_seed(cfg.seed)
     # `gen` (host) draws what the host needs as numbers: the frame order, event window times,
     # exposure pairs and crops (the same on every device); `device_gen` draws the event pixels

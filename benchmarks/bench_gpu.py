@@ -1,0 +1,206 @@
+"""CUDA figures: the rasteriser's backends on the GPU, and whole ``fusiongs deblur`` runs timed.
+
+Three sub-commands, meant to be run by ``benchmarks/bench_gpu.sh`` on a machine with a CUDA GPU:
+
+``render``: forward + backward (MSE to a random target; gradients for means, quats, scales,
+opacities, colours) of ``fusiongs.render.rasterize`` on CUDA tensors, median ms over repeated runs
+after warm-up (``torch.cuda.synchronize`` around each step), for the ``gsplat`` backend (when it
+imports) against the pure-torch backend measured in the same run on the same scene. Scenes are
+``bench_render.make_scene``'s (random Gaussians filling the view, about 15 contributing per pixel;
+the scale factor k is calibrated once on the CPU at 10k/128 and kept, since the count per pixel
+depends on k alone).
+
+``deblur NAME SCENE OUT [--timeout S] [-- override ...]``: runs ``python -m fusiongs deblur SCENE -o
+OUT`` in a child process (its output to ``OUT.log``), times it wall-clock (from process start,
+imports and the scene's loading included, to exit; killed after ``--timeout``), and appends one JSON
+line to ``OUT/../bench_gpu.jsonl`` with the wall time, the training time and iterations, the device
+and backend, the PSNR figures of ``metrics.json`` and the log's last lines.
+
+``table JSONL [JSONL ...]``: prints those lines as a Markdown table.
+
+    PYTHONPATH=. python benchmarks/bench_gpu.py render
+    PYTHONPATH=. python benchmarks/bench_gpu.py deblur s1000 SCENE OUT device=cuda
+    PYTHONPATH=. python benchmarks/bench_gpu.py table OUT/../bench_gpu.jsonl
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import torch  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_render import calibrate, make_scene  # noqa: E402
+
+from fusiongs.render import rasterize  # noqa: E402
+
+GPU_CASES = [("10k/128", 10_000, 128), ("50k/256", 50_000, 256), ("200k/512", 200_000, 512),
+             ("1M/1024", 1_000_000, 1024)]
+PARAMS = ("means", "quats", "scales", "opacities", "colors")
+
+
+def to_device(s: dict, device: torch.device) -> dict:
+    return {k: (v.to(device) if torch.is_tensor(v) else v) for k, v in s.items()}
+
+
+def step(s: dict, backend: str) -> None:
+    """One forward + backward of an MSE loss, finished on the device (synchronised)."""
+    p = {k: s[k].clone().requires_grad_(True) for k in PARAMS}
+    size = s["size"]
+    img, _, _ = rasterize(p["means"], p["quats"], p["scales"], p["opacities"], p["colors"],
+                          s["viewmats"], s["Ks"], size, size, backend=backend)
+    torch.nn.functional.mse_loss(img, s["target"]).backward()
+    if img.is_cuda:
+        torch.cuda.synchronize()
+
+
+def time_ms(s: dict, backend: str, reps: int) -> float:
+    for _ in range(3):
+        step(s, backend)
+    times = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        step(s, backend)
+        times.append((time.perf_counter() - t0) * 1e3)
+    return statistics.median(times)
+
+
+def render_table(reps: int, device: str, n_cases: int) -> None:
+    from fusiongs.render.gsplat_backend import gsplat_available
+
+    dev = torch.device(device)
+    cuda = dev.type == "cuda"
+    backends = (["gsplat"] if cuda and gsplat_available() else []) + ["torch"]
+    k = calibrate(10_000, 128)
+    name = torch.cuda.get_device_name(dev) if cuda else "cpu"
+    print(f"device: {name}; torch {torch.__version__}; k = {k:.3f}; "
+          f"backends: {', '.join(backends)} (torch is the reference)")
+    rows = []
+    for name, n, size in GPU_CASES[:n_cases]:
+        s = to_device(make_scene(n, size, k), dev)
+        ms = {}
+        for b in backends:
+            try:
+                ms[b] = time_ms(s, b, reps)
+            except torch.cuda.OutOfMemoryError:
+                ms[b] = float("nan")
+        rows.append((name, n, size * size, ms))
+        print(f"{name}: " + ", ".join(f"{b} {v:.2f} ms" for b, v in ms.items()), file=sys.stderr,
+              flush=True)
+        del s
+        if cuda:
+            torch.cuda.empty_cache()
+    print("| case | N | px | " + " | ".join(f"{b} ms" for b in backends) + " | torch / gsplat |")
+    print("|---|---|---|" + "---|" * len(backends) + "---|")
+    for name, n, px, ms in rows:
+        ratio = f"{ms['torch'] / ms['gsplat']:.1f}x" if "gsplat" in ms else "n/a"
+        print(f"| {name} | {n} | {px} | " + " | ".join(f"{ms[b]:.2f}" for b in backends)
+              + f" | {ratio} |")
+
+
+def _psnr_rows(metrics: dict) -> dict:
+    """``{method: PSNR}`` of the deblur views (or of the first view group) of ``metrics.json``."""
+    mean = metrics.get("mean") or {}
+    group = mean.get("deblur") or next(iter(mean.values()), {})
+    return {method: m["psnr"] for method, m in group.items() if isinstance(m, dict) and "psnr" in m}
+
+
+def run_deblur(name: str, scene: str, out: str, overrides: list[str], timeout: float | None) -> dict:
+    out_p = Path(out)
+    out_p.parent.mkdir(parents=True, exist_ok=True)
+    cmd = [sys.executable, "-m", "fusiongs", "deblur", scene, "-o", out, "output.progress=false",
+           *overrides]
+    log_path = out_p.parent / f"{out_p.name}.log"  # beside OUT: deblur refuses a non-empty OUT
+    t0 = time.perf_counter()
+    with open(log_path, "w") as log:
+        proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            rc = proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            rc = "timeout"
+    wall = time.perf_counter() - t0
+    text = log_path.read_text()
+    rec = {"name": name, "scene": scene, "overrides": overrides, "rc": rc,
+           "wall_s": round(wall, 2)}
+    metrics_path = out_p / "metrics.json"
+    if metrics_path.is_file():
+        metrics = json.loads(metrics_path.read_text())
+        rec["train_s"] = metrics.get("seconds")
+        rec["render_s"] = metrics.get("render_seconds")
+        rec["backward_s"] = metrics.get("backward_seconds")
+        rec["psnr"] = _psnr_rows(metrics)
+        rec["metrics"] = {k: v for k, v in metrics.items() if k != "views"}
+        if "heldout" in metrics:
+            rec["heldout"] = metrics["heldout"]
+    cfg_path = out_p / "config.yaml"
+    if cfg_path.is_file():
+        import yaml
+
+        cfg = yaml.safe_load(cfg_path.read_text())
+        rec["device"], rec["backend"] = cfg.get("device"), cfg.get("backend")
+        rec["iterations"] = cfg.get("optim", {}).get("iterations")
+    if torch.cuda.is_available():
+        rec["gpu"] = torch.cuda.get_device_name(0)
+    rec["log"] = text.strip().splitlines()[-12:]
+    with open(out_p.parent / "bench_gpu.jsonl", "a") as f:
+        f.write(json.dumps(rec) + "\n")
+    print(json.dumps(rec), flush=True)
+    return rec
+
+
+def table(paths: list[str]) -> None:
+    recs = [json.loads(line) for p in paths for line in Path(p).read_text().splitlines() if line.strip()]
+    print("| run | device / backend | iterations | training s | wall s | PSNR fusiongs | rc |")
+    print("|---|---|---|---|---|---|---|")
+    for r in recs:
+        ps = r.get("psnr", {}).get("fusiongs")
+        train = r.get("train_s")
+        print(f"| {r['name']} | {r.get('device')} / {r.get('backend')} | {r.get('iterations')} | "
+              f"{'' if train is None else f'{train:.1f}'} | {r['wall_s']:.1f} | "
+              f"{'' if ps is None else f'{ps:.2f}'} | {r['rc']} |")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("render")
+    r.add_argument("--reps", type=int, default=20)
+    r.add_argument("--device", default="cuda")
+    r.add_argument("--cases", type=int, default=len(GPU_CASES), help="the first N cases only")
+    d = sub.add_parser("deblur")
+    d.add_argument("name")
+    d.add_argument("scene")
+    d.add_argument("out")
+    d.add_argument("--timeout", type=float, default=float(os.environ.get("STEP_TIMEOUT", 0)) or None,
+                   help="kill the run after this many s (default: $STEP_TIMEOUT, else none)")
+    d.add_argument("overrides", nargs="*")
+    t = sub.add_parser("table")
+    t.add_argument("jsonl", nargs="+")
+    args = ap.parse_args(argv)
+    if args.cmd == "render":
+        if args.device.startswith("cuda") and not torch.cuda.is_available():
+            print("bench_gpu render: no CUDA device (--device cpu times the torch backend here)",
+                  file=sys.stderr)
+            return 2
+        render_table(args.reps, args.device, args.cases)
+    elif args.cmd == "deblur":
+        rec = run_deblur(args.name, args.scene, args.out, args.overrides, args.timeout)
+        return 0 if rec["rc"] == 0 else 1
+    else:
+        table(args.jsonl)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
