@@ -28,7 +28,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import statistics
 import subprocess
 import sys
 import time
@@ -39,7 +38,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_render import calibrate, make_scene  # noqa: E402
+from bench_render import calibrate, make_scene, time_ms  # noqa: E402
 
 from fusiongs.render import rasterize  # noqa: E402
 
@@ -63,17 +62,6 @@ def step(s: dict, backend: str) -> None:
         torch.cuda.synchronize()
 
 
-def time_ms(s: dict, backend: str, reps: int) -> float:
-    for _ in range(3):
-        step(s, backend)
-    times = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        step(s, backend)
-        times.append((time.perf_counter() - t0) * 1e3)
-    return statistics.median(times)
-
-
 def render_table(reps: int, device: str, n_cases: int) -> None:
     from fusiongs.render.gsplat_backend import gsplat_available
 
@@ -90,7 +78,7 @@ def render_table(reps: int, device: str, n_cases: int) -> None:
         ms = {}
         for b in backends:
             try:
-                ms[b] = time_ms(s, b, reps)
+                ms[b] = time_ms(s, b, reps, step=step)
             except torch.cuda.OutOfMemoryError:
                 ms[b] = float("nan")
         rows.append((name, n, size * size, ms))

@@ -110,7 +110,8 @@ def step(s: dict, backend: str) -> None:
     torch.nn.functional.mse_loss(img, s["target"]).backward()
 
 
-def time_ms(s: dict, backend: str, reps: int) -> float:
+def time_ms(s: dict, backend: str, reps: int, step=step) -> float:
+    """Median ms of ``step(s, backend)`` over ``reps`` runs after two warm-up runs."""
     step(s, backend)
     step(s, backend)
     times = []

@@ -48,6 +48,28 @@ def _check(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera, name:
                          tuple(c2w.shape))
 
 
+SORTING_NETWORK_MAX = 8  # up to this many sources, an elementwise sorting network beats topk
+
+
+def smallest_mean(x: torch.Tensor, keep: int) -> torch.Tensor:
+    """Mean of the ``keep`` smallest of ``x [S, ...]`` along its first axis (``inf`` allowed).
+
+    Up to :data:`SORTING_NETWORK_MAX` rows, an odd-even transposition sort of the rows (``S``
+    rounds of elementwise minimum / maximum; Knuth, TAOCP vol. 3, §5.3.4), about 10x faster than
+    ``topk`` over a short strided axis on a CPU; ``topk`` beyond.
+    """
+    n = x.shape[0]
+    if keep == n:
+        return x.mean(0)
+    if n > SORTING_NETWORK_MAX:
+        return x.topk(keep, dim=0, largest=False).values.mean(0)
+    rows = list(x.unbind(0))
+    for r in range(n):
+        for i in range(r % 2, n - 1, 2):
+            rows[i], rows[i + 1] = torch.minimum(rows[i], rows[i + 1]), torch.maximum(rows[i], rows[i + 1])
+    return torch.stack(rows[:keep]).mean(0)
+
+
 def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor, src_c2w: torch.Tensor,
                      camera: PinholeCamera, depths: torch.Tensor, window: int = 5) -> torch.Tensor:
     """Matching cost of every depth hypothesis at every reference pixel.
@@ -69,31 +91,34 @@ def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor
     _check(src, src_c2w, camera, "sources")
     if window < 1 or window % 2 == 0:
         raise InputError(WHERE, "window", "an odd number of pixels >= 1", window)
+    dev = ref.device
     gamma = 1 / 2.2
     r = ref.clamp_min(0).pow(gamma).float().permute(2, 0, 1)[None]      # [1, C, H, W]
-    s = src.clamp_min(0).pow(gamma).float().permute(0, 3, 1, 2)         # [S, C, H, W]
-    rays = _pixel_rays(camera).reshape(-1, 3)                           # [P, 3]
-    ref_c2w, src_c2w = ref_c2w.double(), src_c2w.double()
-    w2s = torch.linalg.inv(src_c2w) @ ref_c2w                           # ref camera -> source camera
-    rot, trans = w2s[:, :3, :3], w2s[:, :3, 3]
-    rot_rays = torch.einsum("sij,pj->spi", rot, rays)                   # [S, P, 3]
-    keep = (src.shape[0] + 1) // 2
+    s = src.to(dev).clamp_min(0).pow(gamma).float().permute(0, 3, 1, 2)  # [S, C, H, W]
+    if r.shape[1] > 1 and bool((r == r[:, :1]).all()) and bool((s == s[:, :1]).all()):
+        r, s = r[:, :1], s[:, :1]  # grey frames stored as RGB: one channel has the same mean
     h, w = camera.height, camera.width
-    out = torch.empty(len(depths), h, w, dtype=torch.float32)
+    # the source pixel of reference ray a at depth d, as grid_sample's normalised coordinates:
+    # g = (A d + t)_xy / (A d + t)_z + o, with A = diag(2fx/w, 2fy/h, 1) R K^-1 [u, 1] per source
+    # (float64 here, float32 per plane: 1e-6 of a pixel at these sizes)
+    w2s = torch.linalg.inv(src_c2w.double().to(dev)) @ ref_c2w.double().to(dev)  # ref cam -> source cam
+    scale = torch.tensor([2 * camera.fx / w, 2 * camera.fy / h, 1.0], dtype=torch.float64, device=dev)
+    a = (torch.einsum("sij,pj->spi", w2s[:, :3, :3], _pixel_rays(camera).to(dev).reshape(-1, 3))
+         * scale).float()                                               # [S, P, 3]
+    t = (w2s[:, None, :3, 3] * scale).float()                           # [S, 1, 3]
+    o = torch.tensor([2 * camera.cx / w - 1, 2 * camera.cy / h - 1], dtype=torch.float32, device=dev)
+    n_s, keep = src.shape[0], (src.shape[0] + 1) // 2
+    out = torch.empty(len(depths), h, w, dtype=torch.float32, device=dev)
     for k, d in enumerate(depths.tolist()):                             # loop over planes only
-        x = rot_rays * d + trans[:, None, :]                            # [S, P, 3]
-        z = x[..., 2]
-        front = z > 1e-6
-        zs = torch.where(front, z, torch.ones_like(z))
-        u = camera.fx * x[..., 0] / zs + camera.cx
-        v = camera.fy * x[..., 1] / zs + camera.cy
-        inside = front & (u >= 0) & (u <= w) & (v >= 0) & (v <= h)
-        grid = torch.stack([2 * u / w - 1, 2 * v / h - 1], -1).float().reshape(-1, h, w, 2)
-        warped = F.grid_sample(s, grid, mode="bilinear", padding_mode="border", align_corners=False)
-        diff = (warped - r).abs().mean(1)                               # [S, H, W]
-        diff = torch.where(inside.reshape(-1, h, w), diff, torch.full_like(diff, float("inf")))
-        best = diff.topk(keep, dim=0, largest=False).values             # [keep, H, W]
-        out[k] = best.mean(0)
+        x = torch.add(t, a, alpha=d)                                    # [S, P, 3]: A d + t
+        z = x[..., 2:]
+        grid = x[..., :2] / z.clamp_min(1e-6) + o
+        inside = (z[..., 0] > 1e-6) & (grid.abs() <= 1).all(-1)        # [S, P]
+        warped = F.grid_sample(s, grid.reshape(n_s, h, w, 2), mode="bilinear", padding_mode="border",
+                               align_corners=False)
+        diff = (warped - r).abs_().mean(1)                              # [S, H, W]
+        diff.masked_fill_(~inside.reshape(n_s, h, w), float("inf"))
+        out[k] = smallest_mean(diff, keep)
     finite = torch.isfinite(out)
     filled = torch.where(finite, out, torch.zeros_like(out))[:, None]
     num = F.avg_pool2d(filled, window, 1, window // 2, count_include_pad=False)[:, 0]

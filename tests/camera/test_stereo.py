@@ -278,3 +278,39 @@ def test_wide_frames_are_swept_at_a_coarser_resolution_on_the_same_surfaces():
         assert float(torch.cdist(pts, truth).amin(1).median()) < 0.03 * scale
     with pytest.raises(ConfigError, match="init.stereo_max_width"):
         InitSettings(stereo_max_width=-1)
+
+
+@pytest.mark.parametrize("sources, channels",
+                         [([1, 2, 4, 5], 3), ([2, 4, 5], 3), ([4], 3), ([1, 2, 4, 5, 6], 1)])
+def test_plane_sweep_cost_matches_its_plain_reference(views, sources, channels):
+    """The fast cost (float32 planes, one channel for grey-as-RGB, the best sources by a sorting
+    network) against the plain float64 form of :mod:`fusiongs.camera._stereo_reference`, on real views
+    with true poses and on grey images stored as RGB; planes out to far beyond the scene so that
+    sources lose the point (inf) at some pixels."""
+    from fusiongs.camera._stereo_reference import plane_sweep_cost as reference
+
+    cam, c2w, images, _ = views
+    images = images[..., :1].expand(-1, -1, -1, 3) if channels == 1 else images
+    planes = inverse_depth_planes(0.3, 200.0, 24)
+    fast = plane_sweep_cost(images[3], c2w[3], images[sources], c2w[sources], cam, planes)
+    slow = reference(images[3], c2w[3], images[sources], c2w[sources], cam, planes)
+    finite = torch.isfinite(slow)
+    assert not finite.all() and finite.any()
+    assert (torch.isfinite(fast) == finite).float().mean() > 0.999  # a point exactly on a border may flip
+    both = finite & torch.isfinite(fast)
+    torch.testing.assert_close(fast[both], slow[both], rtol=1e-4, atol=2e-5)
+    d_fast, c_fast = depth_from_cost(fast, planes)
+    d_slow, c_slow = depth_from_cost(slow, planes)
+    assert torch.isclose(d_fast, d_slow, rtol=1e-3).float().mean() > 0.99  # the same arg-min planes
+    assert torch.isclose(c_fast, c_slow, atol=1e-3).float().mean() > 0.99
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 6, 8, 9])
+def test_smallest_mean_is_the_mean_of_the_sorted_head(n):
+    from fusiongs.camera.stereo import smallest_mean
+
+    g = torch.Generator().manual_seed(n)
+    x = torch.rand(n, 7, 11, generator=g)
+    x[torch.rand(n, 7, 11, generator=g) < 0.2] = float("inf")
+    for keep in range(1, n + 1):
+        torch.testing.assert_close(smallest_mean(x, keep), x.sort(0).values[:keep].mean(0))
