@@ -1,6 +1,7 @@
 """The pose stage of ``fusiongs deblur`` (METHOD.md §6): when a scene has no trajectory or no
 intrinsics, EDI-deblur its frames and register them with pycolmap
-(:func:`fusiongs.camera.poses_from_frames.estimate_camera_and_trajectory`).
+(:func:`fusiongs.camera.poses_from_frames.estimate_camera_and_trajectory`); a scene with fewer than
+two frames registers images made from its events instead (:func:`event_instants`).
 
 Outputs beside the run: ``trajectory_initial.txt`` (TUM, FORMAT.md: the poses training starts
 from) and ``camera.json`` (the intrinsics, which of camera and trajectory were estimated, and the
@@ -23,6 +24,7 @@ from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.camera.poses_from_frames import PoseEstimate, PoseOptions, estimate_camera_and_trajectory
 from fusiongs.errors import InputError
 from fusiongs.io.scene import Scene
+from fusiongs.train.state import EVENT_ONLY_VIEWS
 
 if TYPE_CHECKING:
     from fusiongs.events.thresholds import SensorThresholds
@@ -113,14 +115,41 @@ def edi_instants(scene: Scene, theta, per_exposure: int = 1
     return np.stack(images), np.asarray(times), names
 
 
+def event_instants(scene: Scene, n: int, tau: float, theta0: float
+                   ) -> tuple[np.ndarray, np.ndarray, list[str], tuple[float, float]]:
+    """Images made from the events alone, for a scene without two frames to register.
+
+    ``0.5 · exp(V)`` of the leaky-integrator (high-pass) image ``V`` of the events (Scheerlinck et
+    al., ACCV 2018; :func:`fusiongs.train.data.event_stereo_images`) at ``n`` instants spread over
+    the recording: the last at its end, the first ``min(2 tau, span / 2n)`` after its start (where
+    nothing has fired yet). Moving edges leave the same trail in nearby views, which is what SIFT
+    matches; a pixel that has not fired lately stays at 0.5.
+
+    Returns:
+        ``(images [n, H, W, 1] float32 in [0, 1], times [n] s, names, t_range)``: ``t_range`` is the
+        events' span, which the poses must cover.
+    """
+    from fusiongs.train.data import event_stereo_images
+
+    ev = scene.events
+    t0, t1 = float(ev.t[0]) * 1e-6, float(ev.t[-1]) * 1e-6
+    first = t0 + min(2.0 * tau, 0.5 * (t1 - t0) / max(n, 1))
+    images = event_stereo_images(ev, (first, t1), n, tau, theta0, ev.cfa is not None).numpy()
+    times = np.linspace(first, t1, max(int(n), 2))
+    return images, times, [f"events@{t:.4f}s" for t in times], (t0, t1)
+
+
 def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1,
-                         options: PoseOptions | None = None,
-                         work_dir: str | Path | None = None) -> PoseStageResult:
+                         options: PoseOptions | None = None, work_dir: str | Path | None = None,
+                         event_views: int = 16, event_tau: float = 0.05,
+                         event_theta: float = 0.2) -> PoseStageResult:
     """EDI images of the frames, registered by pycolmap: the scene's missing camera and/or poses.
 
     Args:
         scene: a scene with frames (events make the images sharp; without them the blurry frames
-            are registered, which is less reliable).
+            are registered, which is less reliable), or, with fewer than two frames, with events:
+            then ``event_views`` images of the events (:func:`event_instants`, time constant
+            ``event_tau`` s, contrast ``event_theta``) are registered instead.
         thresholds: event thresholds for EDI (:func:`stage_thresholds`); ``None`` estimates them.
         per_exposure: instants registered per exposure (more views, more time).
         options: :class:`~fusiongs.camera.poses_from_frames.PoseOptions` (default: its defaults
@@ -129,21 +158,29 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
         work_dir: where COLMAP works (default a temporary folder).
 
     Raises:
-        InputError: a scene without frames, or too few registered images (one line naming the
-            counts and how to supply a trajectory or the intrinsics instead).
+        InputError: a scene with neither two frames nor events, or too few registered images (one
+            line naming the counts and how to supply a trajectory or the intrinsics instead).
     """
     fs = scene.frames
-    if len(fs) == 0:
-        raise InputError("pose estimation", "frames", "frames to estimate the camera path from (an "
-                         "event-only scene needs a trajectory file and the intrinsics)", "none")
-    if thresholds is None:
-        thresholds = stage_thresholds(scene)
-    images, times, names = edi_instants(scene, thresholds, per_exposure)
     has_events = scene.events is not None and len(scene.events) > 0
-    source = ("blurry frames (no events)" if not has_events else
-              "EDI at mid-exposure" if per_exposure <= 1 else f"EDI at {per_exposure} instants per exposure")
+    if len(fs) < 2:
+        if not has_events:
+            raise InputError("pose estimation", "frames", "two frames or events to estimate the camera "
+                             "path from (else a trajectory file and the intrinsics)",
+                             f"{len(fs)} frame(s) and no events")
+        images, times, names, (t0, t1) = event_instants(scene, event_views, event_tau, event_theta)
+        source = f"event images at {len(times)} instants (leaky integrator, tau {event_tau:g} s)"
+        if len(fs):  # one frame: its exposure is inside the poses too
+            t0, t1 = min(t0, float(fs.t_start[0])), max(t1, float(fs.t_end[-1]))
+    else:
+        if thresholds is None:
+            thresholds = stage_thresholds(scene)
+        images, times, names = edi_instants(scene, thresholds, per_exposure)
+        source = ("blurry frames (no events)" if not has_events else "EDI at mid-exposure"
+                  if per_exposure <= 1 else f"EDI at {per_exposure} instants per exposure")
+        t0, t1 = float(fs.t_start[0]), float(fs.t_end[-1])
     est = estimate_camera_and_trajectory(scene.camera, images, times, names,
-                                         t_range=(float(fs.t_start[0]) - PAD_S, float(fs.t_end[-1]) + PAD_S),
+                                         t_range=(t0 - PAD_S, t1 + PAD_S),
                                          options=options or PoseOptions(no_parallax=True),
                                          work_dir=work_dir)
     poses = scene.poses if scene.poses is not None else est.poses
@@ -236,7 +273,8 @@ def run_pose_stage(scene: Scene, cfg: DeblurConfig, out: str | Path,
             return restored, calibration
     theta = stage_thresholds(scene, calibration, cfg.threshold.estimate, cfg.threshold.init)
     edi_theta = cfg.priors.edi_theta if cfg.priors.edi_theta else theta  # as the trainer's EDI
-    result = estimate_scene_poses(scene, thresholds=edi_theta)
+    result = estimate_scene_poses(scene, thresholds=edi_theta, event_views=EVENT_ONLY_VIEWS,
+                                  event_tau=cfg.event_only.intensity_tau, event_theta=cfg.threshold.init)
     write_pose_outputs(out, result)
     log(summary_line(result))
     if (calibration is None and theta is not None and cfg.events.enabled
