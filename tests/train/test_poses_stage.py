@@ -182,3 +182,17 @@ def test_a_scene_with_one_frame_and_no_events_cannot_be_posed(raw_sim_scene):
     scene = dataclasses.replace(scene, frames=frame_subset(scene.frames, np.array([0])), events=None)
     with pytest.raises(InputError, match="two frames or events"):
         estimate_scene_poses(scene)
+
+
+def test_a_single_frame_is_posed_from_the_events_and_covered(raw_sim_scene):
+    import dataclasses
+
+    from fusiongs.eval.holdout import frame_subset
+
+    scene = load_scene(raw_sim_scene)
+    one = dataclasses.replace(scene, frames=frame_subset(scene.frames, np.array([2])))
+    result = estimate_scene_poses(one)
+    assert result.source.startswith("event images") and result.estimate.report.registered >= 3
+    poses, fs = result.scene.poses, one.frames
+    assert poses.t[0] <= min(fs.t_start[0], one.events.t[0] * 1e-6)
+    assert poses.t[-1] >= max(fs.t_end[-1], one.events.t[-1] * 1e-6)
