@@ -128,6 +128,8 @@ def run_deblur(name: str, scene: str, out: str, overrides: list[str], timeout: f
         rec["render_s"] = metrics.get("render_seconds")
         rec["backward_s"] = metrics.get("backward_seconds")
         rec["psnr"] = _psnr_rows(metrics)
+        if "affine_fit" in metrics:  # event-only: events fix no brightness or colour balance
+            rec["psnr_affine_fit"] = _psnr_rows(metrics["affine_fit"])
         rec["metrics"] = {k: v for k, v in metrics.items() if k != "views"}
         if "heldout" in metrics:
             rec["heldout"] = metrics["heldout"]
@@ -149,14 +151,15 @@ def run_deblur(name: str, scene: str, out: str, overrides: list[str], timeout: f
 
 def table(paths: list[str]) -> None:
     recs = [json.loads(line) for p in paths for line in Path(p).read_text().splitlines() if line.strip()]
-    print("| run | device / backend | iterations | training s | wall s | PSNR fusiongs | rc |")
+    print("| run | device / backend | iterations | training s | wall s | PSNR fusiongs (affine fit) | rc |")
     print("|---|---|---|---|---|---|---|")
     for r in recs:
         ps = r.get("psnr", {}).get("fusiongs")
+        fit = r.get("psnr_affine_fit", {}).get("fusiongs")
         train = r.get("train_s")
         print(f"| {r['name']} | {r.get('device')} / {r.get('backend')} | {r.get('iterations')} | "
               f"{'' if train is None else f'{train:.1f}'} | {r['wall_s']:.1f} | "
-              f"{'' if ps is None else f'{ps:.2f}'} | {r['rc']} |")
+              f"{'' if ps is None else f'{ps:.2f}'}{'' if fit is None else f' ({fit:.2f})'} | {r['rc']} |")
 
 
 def main(argv=None) -> int:
