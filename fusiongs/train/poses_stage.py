@@ -179,10 +179,15 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
         source = ("blurry frames (no events)" if not has_events else "EDI at mid-exposure"
                   if per_exposure <= 1 else f"EDI at {per_exposure} instants per exposure")
         t0, t1 = float(fs.t_start[0]), float(fs.t_end[-1])
-    est = estimate_camera_and_trajectory(scene.camera, images, times, names,
-                                         t_range=(t0 - PAD_S, t1 + PAD_S),
-                                         options=options or PoseOptions(no_parallax=True),
-                                         work_dir=work_dir)
+    try:
+        est = estimate_camera_and_trajectory(scene.camera, images, times, names,
+                                             t_range=(t0 - PAD_S, t1 + PAD_S),
+                                             options=options or PoseOptions(no_parallax=True),
+                                             work_dir=work_dir)
+    except InputError as e:
+        if e.field != "frames" or len(fs) >= 2:
+            raise
+        raise InputError(e.where, "events", f"{e.expected} (the {source})", e.got) from None
     poses = scene.poses if scene.poses is not None else est.poses
     new = dataclasses.replace(scene, camera=est.camera, poses=poses)
     return PoseStageResult(new, est, thresholds, source)

@@ -196,3 +196,15 @@ def test_a_single_frame_is_posed_from_the_events_and_covered(raw_sim_scene):
     poses, fs = result.scene.poses, one.frames
     assert poses.t[0] <= min(fs.t_start[0], one.events.t[0] * 1e-6)
     assert poses.t[-1] >= max(fs.t_end[-1], one.events.t[-1] * 1e-6)
+
+
+def test_event_images_that_do_not_register_are_named_as_events(raw_event_only_scene, monkeypatch):
+    import fusiongs.train.poses_stage as stage
+    from fusiongs.errors import InputError
+
+    def refuse(*args, **kwargs):
+        raise InputError("pose estimation", "frames", "at least 3 images registered", "1 of 16 registered")
+
+    monkeypatch.setattr(stage, "estimate_camera_and_trajectory", refuse)
+    with pytest.raises(InputError, match=r"pose estimation: events: .*\(the event images at 16 instants"):
+        estimate_scene_poses(load_scene(raw_event_only_scene[0]))
