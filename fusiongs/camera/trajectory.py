@@ -34,7 +34,9 @@ from fusiongs.camera.lie import make_rigid, rigid_inverse, se3_exp, se3_log, so3
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.errors import InputError
 
-_BASIS = torch.tensor([[6.0, 0, 0, 0], [5, 3, -3, 1], [1, 3, 3, -2], [0, 0, 0, 1]]) / 6
+# the cumulative basis B (rows: B_0..B_3 as coefficients of 1, u, u², u³), written out in
+# interpolate_bspline with Python numbers: no tensor to copy to the device on every call
+_BASIS = ((6.0, 0.0, 0.0, 0.0), (5.0, 3.0, -3.0, 1.0), (1.0, 3.0, 3.0, -2.0), (0.0, 0.0, 0.0, 1.0))
 
 
 def interpolate_linear(knot_t: torch.Tensor, knots: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
@@ -78,11 +80,11 @@ def interpolate_bspline(t0: float, spacing: float, knots: torch.Tensor, t: torch
     i = torch.floor(s).clamp(0, n_seg - 1)
     u = s - i
     i = i.long()
-    basis = _BASIS.to(dtype=t.dtype, device=t.device)
-    bt = torch.stack([torch.ones_like(u), u, u * u, u * u * u], -1) @ basis.T  # [T, 4]
+    u2, u3 = u * u, u * u * u
+    bt = torch.stack([(c0 + c1 * u + c2 * u2 + c3 * u3) / 6.0 for c0, c1, c2, c3 in _BASIS[1:]], -1)
     ctrl = knots[i[:, None] + torch.arange(4, device=t.device)]  # [T, 4, 4, 4]
     omega = se3_log(rigid_inverse(ctrl[:, :-1]) @ ctrl[:, 1:])  # [T, 3, 6]
-    steps = se3_exp(bt[:, 1:, None] * omega)  # [T, 3, 4, 4]
+    steps = se3_exp(bt[:, :, None] * omega)  # [T, 3, 4, 4]: B_1..B_3(u)
     return ctrl[:, 0] @ steps[:, 0] @ steps[:, 1] @ steps[:, 2]
 
 

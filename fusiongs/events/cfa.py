@@ -9,6 +9,8 @@ empirically. Used by both the event (colour DAVIS) and the frame (raw files) sid
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import torch
 
@@ -112,22 +114,31 @@ def demosaic(raw: np.ndarray | torch.Tensor, pattern: str, method: str = "biline
     return _opencv(raw, pattern, method)
 
 
+@functools.lru_cache(maxsize=16)
+def _bilinear_tensors(pattern: str, h: int, w: int, device: torch.device, dtype: torch.dtype
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+    """The CFA masks ``[3, H, W]`` and bilinear kernels ``[3, 1, 3, 3]`` on ``device``, made once
+    per (pattern, size, device, dtype): the demosaic mode calls :func:`_bilinear` every training
+    step, and a host-to-device copy per call stalls a GPU."""
+    masks = torch.as_tensor(cfa_masks(pattern, h, w), dtype=dtype, device=device)
+    kernels = torch.as_tensor(np.stack([_K_RB, _K_G, _K_RB]), dtype=dtype, device=device)[:, None]
+    return masks, kernels
+
+
 def _bilinear(raw, pattern):
     h, w = raw.shape[-2], raw.shape[-1]
-    masks = cfa_masks(pattern, h, w)
     if isinstance(raw, torch.Tensor):
         x = raw if raw.is_floating_point() else raw.float()
         lead = x.shape[:-2]
         x = x.reshape(-1, 1, h, w)
-        m = torch.from_numpy(masks).to(device=x.device, dtype=x.dtype)  # [3, H, W]
-        k = torch.from_numpy(np.stack([_K_RB, _K_G, _K_RB])).to(device=x.device, dtype=x.dtype)
-        k = k[:, None]  # [3, 1, 3, 3]
+        m, k = _bilinear_tensors(pattern, h, w, x.device, x.dtype)  # [3, H, W], [3, 1, 3, 3]
         num = torch.nn.functional.conv2d(x * m, k, padding=1, groups=3)
         den = torch.nn.functional.conv2d(m[None], k, padding=1, groups=3)
         out = num / den
         return out.reshape(*lead, 3, h, w).movedim(-3, -1)
     import cv2
 
+    masks = cfa_masks(pattern, h, w)
     x = np.asarray(raw)
     dtype = x.dtype if x.dtype in (np.float32, np.float64) else np.float32
     flat = x.reshape(-1, h, w).astype(np.float64)

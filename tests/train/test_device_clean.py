@@ -61,10 +61,6 @@ HOST_SIDE = {
     # crop offsets: two Python ints drawn from the trainer's host generator, whose device is the
     # CPU. crop.py is outside this change; it should say device=gen.device
     ("fusiongs/train/crop.py", "random"): "host draw of two ints",
-    # KNOWN, in the loop (colour demosaic mode): the bilinear demosaic copies its masks and
-    # kernels from numpy to the device on every call (a blocking copy on a GPU); to be fixed in
-    # events/cfa.py, which is outside this change
-    ("fusiongs/events/cfa.py", "_bilinear"): "known: per-call host copies",
 }
 
 
@@ -250,10 +246,10 @@ SYNC_ALLOWED = {
     "flush_pending": "history and progress bar, every FLUSH_EVERY iterations and at checkpoints",
     "save_checkpoint": "checkpoints",
     "_payload": "checkpoints (the payload's running PSNR copied to the host)",
-    # KNOWN, outside this change: camera/trajectory.py copies its B-spline basis to the device per
-    # call (_BASIS.to(device)); events/cfa.py copies its demosaic masks and kernels per call
-    "interpolate_bspline": "known: fix in camera/trajectory.py",
-    "_bilinear": "known: fix in events/cfa.py",
+    # the demosaic masks and kernels are copied to the device once per size (cached), which may
+    # be in the first step (session 20: the per-call copies of cfa.py and the B-spline basis of
+    # camera/trajectory.py are gone; not yet run on a GPU since)
+    "_bilinear_tensors": "first call per image size and device only",
 }
 cuda = pytest.mark.skipif(not has_cuda(), reason="needs a CUDA GPU")
 
