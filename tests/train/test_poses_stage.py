@@ -208,3 +208,20 @@ def test_event_images_that_do_not_register_are_named_as_events(raw_event_only_sc
     monkeypatch.setattr(stage, "estimate_camera_and_trajectory", refuse)
     with pytest.raises(InputError, match=r"pose estimation: events: .*\(the event images at 16 instants"):
         estimate_scene_poses(load_scene(raw_event_only_scene[0]))
+
+
+def test_the_real_cups_events_alone_are_refused_not_misplaced():
+    """eslnet_cups' events alone register about 3 of 16 images, on a path far from the one its
+    frames give (RESULTS.md): the stage must stop with its one-line error, not go on."""
+    import dataclasses
+
+    from fusiongs.errors import InputError
+    from fusiongs.eval.holdout import frame_subset
+
+    src = real_data_dir() / "eslnet_cups"
+    if not (src / "scene.json").is_file():
+        pytest.skip(f"real recording eslnet_cups not found in {real_data_dir()}")
+    scene = load_scene(src)
+    events_only = dataclasses.replace(scene, frames=frame_subset(scene.frames, np.array([], dtype=int)))
+    with pytest.raises(InputError, match=r"events: expected at least 8 images registered"):
+        estimate_scene_poses(events_only)
