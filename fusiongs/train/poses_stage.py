@@ -171,7 +171,7 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
         images, times, names, (t0, t1) = event_instants(scene, event_views, event_tau, event_theta)
         source = f"event images at {len(times)} instants (leaky integrator, tau {event_tau:g} s)"
         # half of them at least: on real recordings a few registered event images were no sign
-        # of a right path (eslnet_cups: 3 of 16, 4° RMS and half the path's extent off the frames'
+        # of a right path (eslnet_cups: 3 of 16, 4° RMS and 2/3 of the path's extent off the frames'
         # poses; benchmarks/RESULTS.md), and the rest would only be interpolated
         options = dataclasses.replace(options or PoseOptions(no_parallax=True),
                                       min_registered=max(3, -(-len(times) // 2)))
