@@ -96,6 +96,8 @@ step "s1000 auto (gsplat)" 150 $B deblur s1000_auto "$WORK/s1000" "$WORK/runs/s1
 step "eslnet_cups auto" 180 $B deblur cups_auto "$CUPS" "$WORK/runs/cups_auto" -- device=$DEV $EXTRA $BK
 step "event-only tuning 6" 180 $B deblur eo6_auto "$WORK/eo6" "$WORK/runs/eo6_auto" -- --config event_only device=$DEV $EXTRA $BK
 step "render" 90 $B render --reps 20 2>&1 | tee "$OUT/render.txt"
+step "profile (40 iterations)" 90 bash -c "$B profile --skip 20 --steps 20 $WORK/s1000 -- device=$DEV \
+  $BK > $WORK/runs/profile.txt 2>&1"  # lands in runs.tgz (OUT holds 8 files at most)
 cp "$WORK/runs/bench_gpu.jsonl" "$OUT/" 2>/dev/null
 $B table "$WORK/runs/bench_gpu.jsonl" | tee "$OUT/table.md"
 el "done"

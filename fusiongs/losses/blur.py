@@ -14,10 +14,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import torch
-from kornia.metrics import ssim
 
 from fusiongs.errors import InputError
 from fusiongs.frames.response import linear_to_response
+from fusiongs.losses.ssim import ssim_map
 
 
 def exposure_instants(
@@ -147,8 +147,9 @@ def render_blurry(
 def blur_loss(pred: torch.Tensor, target: torch.Tensor, lam: float = 0.2) -> torch.Tensor:
     """Photometric blur loss ``(1 - lam) * L1 + lam * (1 - SSIM)`` (3DGS, Kerbl et al. 2023).
 
-    SSIM is kornia's (11x11 gaussian window, sigma 1.5, ``'same'`` padding, ``max_val`` 1) and the
-    term is ``1 - mean SSIM`` (not kornia's ``ssim_loss``, which is ``(1 - SSIM) / 2``).
+    SSIM is kornia's map (11x11 gaussian window, sigma 1.5, ``'same'`` padding, ``max_val`` 1),
+    computed by :func:`fusiongs.losses.ssim.ssim_map` in a few batched operations, and the term is
+    ``1 - mean SSIM`` (not kornia's ``ssim_loss``, which is ``(1 - SSIM) / 2``).
 
     Args:
         pred: ``[B, H, W, C]`` or ``[H, W, C]`` predicted frame in the frames' response space.
@@ -168,5 +169,5 @@ def blur_loss(pred: torch.Tensor, target: torch.Tensor, lam: float = 0.2) -> tor
         return l1
     p = pred if pred.ndim == 4 else pred[None]
     q = target if target.ndim == 4 else target[None]
-    s = ssim(p.permute(0, 3, 1, 2), q.permute(0, 3, 1, 2), window_size=11, max_val=1.0).mean()
+    s = ssim_map(p.permute(0, 3, 1, 2), q.permute(0, 3, 1, 2), window_size=11, max_val=1.0).mean()
     return (1.0 - lam) * l1 + lam * (1.0 - s)
