@@ -1,6 +1,6 @@
 """CUDA figures: the rasteriser's backends on the GPU, and whole ``fusiongs deblur`` runs timed.
 
-Three sub-commands, meant to be run by ``benchmarks/bench_gpu.sh`` on a machine with a CUDA GPU:
+Four sub-commands, meant to be run by ``benchmarks/bench_gpu.sh`` on a machine with a CUDA GPU:
 
 ``render``: forward + backward (MSE to a random target; gradients for means, quats, scales,
 opacities, colours) of ``fusiongs.render.rasterize`` on CUDA tensors, median ms over repeated runs
@@ -137,9 +137,7 @@ def run_deblur(name: str, scene: str, out: str, overrides: list[str], timeout: f
         rec["psnr"] = _psnr_rows(metrics)
         if "affine_fit" in metrics:  # event-only: events fix no brightness or colour balance
             rec["psnr_affine_fit"] = _psnr_rows(metrics["affine_fit"])
-        rec["metrics"] = {k: v for k, v in metrics.items() if k != "views"}
-        if "heldout" in metrics:
-            rec["heldout"] = metrics["heldout"]
+        rec["metrics"] = {k: v for k, v in metrics.items() if k != "views"}  # held-out figures too
     cfg_path = out_p / "config.yaml"
     if cfg_path.is_file():
         import yaml
@@ -213,7 +211,7 @@ def main(argv=None) -> int:
     d.add_argument("name")
     d.add_argument("scene")
     d.add_argument("out")
-    d.add_argument("--timeout", type=float, default=float(os.environ.get("STEP_TIMEOUT", 0)) or None,
+    d.add_argument("--timeout", type=float, default=None,
                    help="kill the run after this many s (default: $STEP_TIMEOUT, else none)")
     d.add_argument("overrides", nargs="*")
     t = sub.add_parser("table")
@@ -224,6 +222,11 @@ def main(argv=None) -> int:
     pr.add_argument("--steps", type=int, default=20)
     pr.add_argument("overrides", nargs="*")
     args = ap.parse_args(argv)
+    if args.cmd == "deblur" and args.timeout is None and os.environ.get("STEP_TIMEOUT"):
+        try:
+            args.timeout = float(os.environ["STEP_TIMEOUT"])
+        except ValueError:
+            ap.error(f"STEP_TIMEOUT: expected seconds, got {os.environ['STEP_TIMEOUT']!r}")
     if args.cmd == "render":
         if args.device.startswith("cuda") and not torch.cuda.is_available():
             print("bench_gpu render: no CUDA device (--device cpu times the torch backend here)",

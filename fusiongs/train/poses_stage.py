@@ -163,6 +163,7 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
     """
     fs = scene.frames
     has_events = scene.events is not None and len(scene.events) > 0
+    options = options or PoseOptions(no_parallax=True)
     if len(fs) < 2:
         if not has_events:
             raise InputError("pose estimation", "frames", "two frames or events to estimate the camera "
@@ -173,8 +174,7 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
         # half of them at least: on real recordings a few registered event images were no sign
         # of a right path (eslnet_cups: 3 of 16, 4° RMS and 2/3 of the path's extent off the frames'
         # poses; benchmarks/RESULTS.md), and the rest would only be interpolated
-        options = dataclasses.replace(options or PoseOptions(no_parallax=True),
-                                      min_registered=max(3, -(-len(times) // 2)))
+        options = dataclasses.replace(options, min_registered=max(3, -(-len(times) // 2)))
         if len(fs):  # one frame: its exposure is inside the poses too
             t0, t1 = min(t0, float(fs.t_start[0])), max(t1, float(fs.t_end[-1]))
     else:
@@ -187,8 +187,7 @@ def estimate_scene_poses(scene: Scene, *, thresholds=None, per_exposure: int = 1
     try:
         est = estimate_camera_and_trajectory(scene.camera, images, times, names,
                                              t_range=(t0 - PAD_S, t1 + PAD_S),
-                                             options=options or PoseOptions(no_parallax=True),
-                                             work_dir=work_dir)
+                                             options=options, work_dir=work_dir)
     except InputError as e:
         if e.field != "frames" or len(fs) >= 2:
             raise
