@@ -78,7 +78,9 @@ def run(args: argparse.Namespace) -> int:
     if any(g and g != "neighbours" and g != "off" for g in gates):
         print("refractory gate per channel: " + ", ".join(f"{n} {g}" for n, g in zip(th.channels, gates)))
     if not th.scale_known:
-        print("note: fewer than two frames, so the thresholds are known only up to a common scale: "
+        why = ("the frames' consistency fit failed on every channel"
+               if th.details.get("consistency_fit") else "fewer than two frames")
+        print(f"note: {why}, so the thresholds are known only up to a common scale: "
               f"the ON/OFF ratio is measured, the scale assumed ({th.details.get('assumed_scale')})",
               file=sys.stderr)
     print(f"wrote {out} ({th.method}; {seconds:.1f} s)")

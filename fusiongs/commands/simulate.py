@@ -64,7 +64,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "seed of the sweep (fusiongs.sim.sweep); --size, --duration, --frames, "
                              "--novel and the render options may still be given")
     parser.add_argument("--split", default=None,
-                        help="sweep split of --sweep-seed: tuning (seeds 0-99) or test (1000-1099) "
+                        help="sweep split of --sweep-seed: tuning (seeds 0-999) or test (1000-1999) "
                              "(default tuning)")
     parser.add_argument("--dvs-rate", default=None, help="event-model render rate, Hz (default 1000)")
     parser.add_argument("--blur-samples", default=None, help="renders averaged per exposure (default 48)")

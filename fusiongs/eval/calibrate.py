@@ -106,9 +106,9 @@ class CalibrateOptions:
             channel's estimate is pooled with the others by its precision
             (:func:`shrink_channels`; 0 keeps every channel on its own).
         channel_outlier: a channel whose estimate lies more than this many combined standard
-            deviations from the other channels' common value, while those agree with each other,
-            has its uncertainty widened to that distance before pooling (0: never); see
-            :func:`discrepant_channels`.
+            deviations (its own and ``channel_prior``) from the channels' median has its
+            uncertainty widened to that distance before pooling (0: never); see
+            :func:`discrepant_channels`. 2 was chosen on tuning seeds (session 21).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
         iv_offsets: fit the two indicator offsets in the IV model
             (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`).
@@ -144,7 +144,7 @@ class CalibrateOptions:
     own_gate_max_spread: float = 1.05
     dead_time_jump: float = 5.0
     channel_prior: float = 0.05
-    channel_outlier: float = 3.0
+    channel_outlier: float = 2.0
     max_gap: int = 4
     units: str = "iv"
     iv_offsets: bool = True
@@ -390,13 +390,25 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                     "n_samples": opts.n_samples})
     tp, sp = np.array(out_p), np.array(sd_p)
     tn, sn = np.array(out_n), np.array(sd_n)
+    failed = failed_channels(tp, tn, opts.theta_range)
+    if failed.all():
+        details["per_channel"] = per
+        details["consistency_fit"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist(),
+                                      "failed": "every channel's estimate is outside the searched range"}
+        return _without_pairs(frames, events, names, ratio, opts, details,
+                              "the frames' consistency fit failed on every channel: ")
+    for c in np.flatnonzero(failed):  # it takes the other channels' value in the pooling
+        per[c]["failed"] = f"estimate {tp[c]:.3g} / {tn[c]:.3g} outside the searched range"
+        sp[c] = sn[c] = np.inf
     if opts.spread_correction:
         fac = np.exp(var)
         tp, sp, tn, sn = tp * fac[0], sp * fac[0], tn * fac[1], sn * fac[1]
         details["threshold_spread"] = {"log_variance": var.tolist(), "pixels": n_spread.tolist(),
                                        "factor": fac.tolist()}
     if len(names) > 1 and opts.channel_prior > 0:
-        details["per_channel_unpooled"] = {"theta_pos": tp.tolist(), "theta_neg": tn.tolist()}
+        details["per_channel_unpooled"] = {k: [float(x) if np.isfinite(x) else None for x in v]
+                                           for k, v in (("theta_pos", tp), ("theta_neg", tn),
+                                                        ("std_pos", sp), ("std_neg", sn))}
         wide_p = discrepant_channels(tp, sp, opts.channel_prior, opts.channel_outlier)
         wide_n = discrepant_channels(tn, sn, opts.channel_prior, opts.channel_outlier)
         details["channel_outliers"] = [[names[c] for c in np.flatnonzero(w > s)]
@@ -405,6 +417,16 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         tn, sn = shrink_channels(tn, wide_n, opts.channel_prior)
     return SensorThresholds(names, tp, tn, sp, sn, True,
                             f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
+
+
+def failed_channels(theta_pos: np.ndarray, theta_neg: np.ndarray, theta_range: tuple[float, float]
+                    ) -> np.ndarray:
+    """``[C]`` bool: a channel's fit failed, i.e. either estimate is not finite or lies more than a
+    factor 2 outside ``theta_range`` (the IV solve is unconstrained: a dark channel with a few
+    dozen pixel pairs came out at 40 or 6e6 on test seed 1099, RESULTS.md session 21)."""
+    lo, hi = theta_range
+    ok = [np.isfinite(v) & (v >= 0.5 * lo) & (v <= 2.0 * hi) for v in (theta_pos, theta_neg)]
+    return ~(ok[0] & ok[1])
 
 
 def _compact(counts: np.ndarray) -> np.ndarray:
@@ -434,8 +456,9 @@ def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch:
 
 
 def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...], ratio: list[dict],
-                   opts: CalibrateOptions, details: dict) -> SensorThresholds:
-    """Fewer than two frames: the ON/OFF ratio from the event balance, the common scale assumed.
+                   opts: CalibrateOptions, details: dict, why: str = "") -> SensorThresholds:
+    """Fewer than two frames (or a consistency fit that failed on every channel, said by ``why``):
+    the ON/OFF ratio from the event balance, the common scale assumed.
 
     One frame's EDI sharpness estimate of the scale (:func:`estimate_theta`) is recorded in the
     details (``single_frame_sharpness``) but not used: it is not reliable (module docstring)."""
@@ -444,7 +467,7 @@ def _without_pairs(frames: FrameSet, events: EventStream, names: tuple[str, ...]
     if not np.all(np.isfinite(rho) & (rho > 0)):
         raise InputError("calibrate", "events", "both ON and OFF events on every channel", rho.tolist())
     scale = opts.unknown_scale
-    method = "event balance (ON/OFF ratio only; common scale assumed)"
+    method = why + "event balance (ON/OFF ratio only; common scale assumed)"
     if len(frames) == 1:
         method = "one frame: " + method
         details["single_frame_sharpness"] = estimate_theta(

@@ -74,8 +74,8 @@ class SceneRange:
 
 SENSOR_RANGE = SensorRange()
 SCENE_RANGE = SceneRange()
-TUNING_SEEDS = range(0, 100)
-TEST_SEEDS = range(1000, 1100)
+TUNING_SEEDS = range(0, 1000)
+TEST_SEEDS = range(1000, 2000)
 SPLITS: dict[str, range] = {"tuning": TUNING_SEEDS, "test": TEST_SEEDS}
 
 _SENSOR_STREAM, _SCENE_STREAM = 1, 2  # independent random streams drawn from one seed
