@@ -183,6 +183,12 @@ def edi_images(scene: Scene, theta, device: torch.device) -> torch.Tensor:
     return torch.from_numpy(np.clip(e, 0.0, None).astype(np.float32)).to(device)
 
 
+def even_instants(t_range: tuple[float, float], n: int) -> np.ndarray:
+    """``[max(n, 2)]`` float64 instants (s) evenly over ``t_range``, both ends included: where
+    :func:`hpf_images` (and so :func:`event_stereo_images`) take their images."""
+    return np.linspace(t_range[0], t_range[1], max(int(n), 2))
+
+
 def hpf_images(events: EventStream, t_range: tuple[float, float], n: int, tau: float,
                theta0: float, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
     """HPF intensity images at ``n`` instants over ``t_range`` (Event-3DGS's intensity anchor).
@@ -192,7 +198,7 @@ def hpf_images(events: EventStream, t_range: tuple[float, float], n: int, tau: f
     """
     from fusiongs.events.hpf import high_pass_filter
 
-    times = np.linspace(t_range[0], t_range[1], max(int(n), 2))
+    times = even_instants(t_range, n)
     v = high_pass_filter(events, times * 1e6, tau=tau, contrast=theta0)
     return torch.from_numpy(times), torch.from_numpy(v[..., None]).to(device)
 

@@ -129,13 +129,13 @@ def event_instants(scene: Scene, n: int, tau: float, theta0: float
         ``(images [n, H, W, 1] float32 in [0, 1], times [n] s, names, t_range)``: ``t_range`` is the
         events' span, which the poses must cover.
     """
-    from fusiongs.train.data import event_stereo_images
+    from fusiongs.train.data import even_instants, event_stereo_images
 
     ev = scene.events
     t0, t1 = float(ev.t[0]) * 1e-6, float(ev.t[-1]) * 1e-6
     first = t0 + min(2.0 * tau, 0.5 * (t1 - t0) / max(n, 1))
     images = event_stereo_images(ev, (first, t1), n, tau, theta0, ev.cfa is not None).numpy()
-    times = np.linspace(first, t1, max(int(n), 2))
+    times = even_instants((first, t1), n)
     return images, times, [f"events@{t:.4f}s" for t in times], (t0, t1)
 
 
