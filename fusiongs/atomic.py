@@ -8,6 +8,7 @@ temporary: a hidden file named ``.<stem>.<8 random characters>.tmp<suffix>``
 from __future__ import annotations
 
 import contextlib
+import math
 import os
 import re
 import tempfile
@@ -83,3 +84,16 @@ def write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
+
+
+def json_ready(obj):
+    """``obj`` with every non-finite float (NaN, inf; numpy's too) replaced by ``None``, through
+    dicts, lists and tuples: ``json.dumps`` would write ``NaN`` / ``Infinity``, which strict JSON
+    readers (a browser's ``JSON.parse``, ``jq``) refuse."""
+    if isinstance(obj, dict):
+        return {k: json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fusiongs.atomic import json_ready
 from fusiongs.errors import InputError
 
 GREY_CHANNELS = ("grey",)
@@ -101,7 +102,7 @@ class SensorThresholds:
         return {"channels": list(self.channels), "theta_pos": clean(self.theta_pos),
                 "theta_neg": clean(self.theta_neg), "std_pos": clean(self.std_pos),
                 "std_neg": clean(self.std_neg), "scale_known": bool(self.scale_known),
-                "method": self.method, "details": self.details}
+                "method": self.method, "details": json_ready(self.details)}
 
     @staticmethod
     def from_dict(doc: object, where: str = "calibration.json") -> SensorThresholds:

@@ -128,14 +128,7 @@ def write_history(h: History, path: Path) -> None:
     """``history.jsonl`` (one JSON object per recorded iteration; NaN written as null), atomically."""
     import json
 
-    from fusiongs.atomic import write_text
+    from fusiongs.atomic import json_ready, write_text
 
-    def clean(v):
-        if isinstance(v, float) and not math.isfinite(v):
-            return None
-        if isinstance(v, list):
-            return [clean(x) for x in v]
-        return v
-
-    lines = [json.dumps({k: clean(v) for k, v in row.items()}) for row in history_rows(h)]
+    lines = [json.dumps(json_ready(row)) for row in history_rows(h)]
     write_text(path, "\n".join(lines) + ("\n" if lines else ""))

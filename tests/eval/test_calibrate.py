@@ -411,3 +411,17 @@ def test_a_channel_whose_fit_fails_takes_the_others_value_and_all_failing_falls_
     th = estimate_thresholds(fr, ev)
     assert not th.scale_known and th.method.startswith("the frames' consistency fit failed")
     assert np.allclose(np.sqrt(th.theta_pos * th.theta_neg), CalibrateOptions().unknown_scale)
+
+
+def test_calibration_json_is_strict_json(tmp_path, grey_asym):
+    th = estimate_thresholds(grey_asym.scene.frames, grey_asym.scene.events)
+    th.details["probe"] = {"std": [float("nan"), float("inf"), 1.0]}
+    path = write_calibration(tmp_path / "calibration.json", th)
+    text = Path(path).read_text()
+    assert "NaN" not in text and "Infinity" not in text
+
+    def refuse(name):
+        raise ValueError(name)
+
+    doc = json.loads(text, parse_constant=refuse)
+    assert doc["thresholds"]["details"]["probe"]["std"] == [None, None, 1.0]
