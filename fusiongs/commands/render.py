@@ -1,7 +1,8 @@
 """``fusiongs render OUT --t ...``: sharp images at any instants from a finished run.
 
 These are the model's renders: the exposure-ratio correction of ``fusiongs deblur``'s deblurred
-frames needs the scene's frames and is not applied here (docs/method.md).
+frames needs the scene's frames and is not applied here (docs/method.md). An event-only run's
+exposure gain (``exposure.json``) is.
 """
 
 from __future__ import annotations
@@ -39,13 +40,15 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusiongs.frames.image_io import write_png
+    from fusiongs.train.outputs import read_exposure
     from fusiongs.train.render_io import render_srgb
     from fusiongs.train.restore import restore_state
 
     state, camera, cfg = restore_state(Path(args.run) / "checkpoint.pt")
     check_instants(args.t, state.trajectory.t_min, state.trajectory.t_max)
     out = Path(args.out) if args.out else Path(args.run) / "renders_t"
-    imgs = render_srgb(state, camera, args.t, cfg["backend"])
+    # an event-only run's gain (exposure.json), so that these match its renders
+    imgs = render_srgb(state, camera, args.t, cfg["backend"], gain=read_exposure(Path(args.run)))
     for t, img in zip(args.t, imgs):
         path = out / f"t_{t:.6f}.png"
         write_png(path, img)

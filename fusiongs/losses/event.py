@@ -160,24 +160,32 @@ def event_loss_mse(
     return _weighted_mean(r**2, channel_weights)
 
 
-def band_penalty(d_r: torch.Tensor, d_gt: torch.Tensor, beta: float, zero_tol: float = 0.0) -> torch.Tensor:
+def band_penalty(d_r: torch.Tensor, d_gt: torch.Tensor, beta: float, zero_tol: float = 0.0,
+                 censored: torch.Tensor | None = None) -> torch.Tensor:
     """Event-3DGS Eq. 15, elementwise, in count units.
 
     ``relu(|D_r - D_gt - beta| - beta)`` where ``D_gt > 0`` (zero for ``D_r`` in
     ``[D_gt, D_gt + 2 beta]``), ``relu(|D_gt - D_r - beta| - beta)`` where ``D_gt < 0`` (zero in
-    ``[D_gt - 2 beta, D_gt]``) and ``relu(|D_r| - 1)`` where ``|D_gt| <= zero_tol``.
+    ``[D_gt - 2 beta, D_gt]``) and ``relu(|D_r| - 1)`` where ``|D_gt| <= zero_tol``. Where
+    ``censored`` (a count that is only a lower bound, see :func:`censored_residual`) the band is
+    open on the far side: ``relu(D_gt - D_r)`` for ``D_gt > 0``, ``relu(D_r - D_gt)`` for
+    ``D_gt < 0`` (only a shortfall is penalised).
 
     Args:
         d_r: ``[...]`` rendered change in count units.
         d_gt: ``[...]`` target count (signed event count or HPF contrast).
         beta: band half-width (0.5 for real data, 0 for clean synthetic data).
         zero_tol: ``|D_gt|`` at or below it counts as "no event" (0 for integer counts).
+        censored: bool broadcastable to ``d_r``, or None for none.
 
     Returns:
         ``[...]`` non-negative penalty.
     """
     pos = torch.relu((d_r - d_gt - beta).abs() - beta)
     neg = torch.relu((d_gt - d_r - beta).abs() - beta)
+    if censored is not None:
+        pos = torch.where(censored, torch.relu(d_gt - d_r), pos)
+        neg = torch.where(censored, torch.relu(d_r - d_gt), neg)
     zero = torch.relu(d_r.abs() - 1.0)
     return torch.where(d_gt.abs() <= zero_tol, zero, torch.where(d_gt > 0, pos, neg))
 
@@ -208,6 +216,7 @@ def event_loss_band(
     beta: float = 0.5,
     channel_weights: torch.Tensor | None = None,
     zero_tol: float = 0.0,
+    censored: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """Event-3DGS band loss (Han et al., NeurIPS 2024, Eq. 15) with per-polarity thresholds.
 
@@ -222,6 +231,8 @@ def event_loss_band(
         beta: band half-width.
         channel_weights: weights broadcastable to ``[P, C']`` or None.
         zero_tol: see :func:`band_penalty`.
+        censored: bool broadcastable to ``[P, C']``: counts that are lower bounds (the pixel hit
+            its refractory period in the window), penalised one-sided (:func:`band_penalty`).
 
     Returns:
         Scalar loss in count units.
@@ -229,7 +240,7 @@ def event_loss_band(
     if theta_neg is None:
         theta_neg = theta_pos
     theta = polarity_theta(d_gt, delta_pred, theta_pos, theta_neg, zero_tol)
-    return _weighted_mean(band_penalty(delta_pred / theta, d_gt, beta, zero_tol), channel_weights)
+    return _weighted_mean(band_penalty(delta_pred / theta, d_gt, beta, zero_tol, censored), channel_weights)
 
 
 def event_loss_pvc(

@@ -17,12 +17,20 @@ from fusiongs.frames.response import linear_to_srgb, response_to_linear
 from fusiongs.io.scene import Scene
 from fusiongs.scene.ply import save_ply
 from fusiongs.train.config import save_config
-from fusiongs.train.render_io import render_srgb
+from fusiongs.train.render_io import (
+    EXPOSURE_LEVEL,
+    EXPOSURE_PERCENTILE,
+    exposed_srgb,
+    exposure_gain,
+    render_linear,
+    render_srgb,
+)
 from fusiongs.train.state import FusionState
-from fusiongs.train.trainer import Trained
+from fusiongs.train.trainer import Trained, auto_exposure
 
 TRAJECTORY_FILE = "trajectory.txt"  # the refined camera path (the pose stage's own is trajectory_initial.txt)
 TRAJECTORY_RATE_HZ = 200.0  # the written path is at least this dense
+EXPOSURE_FILE = "exposure.json"  # the gain of an event-only run's renders (fusiongs render reuses it)
 
 
 
@@ -106,6 +114,32 @@ def write_trajectory(tr: Trained, scene: Scene, path: Path) -> PoseSamples:
     return poses
 
 
+def write_exposure(path: Path, gain: float) -> None:
+    """``exposure.json``: the linear gain of an event-only run's renders (what the outputs and
+    ``fusiongs render`` apply before clipping at white)."""
+    write_text(path, json.dumps({
+        "gain": gain, "percentile": EXPOSURE_PERCENTILE, "level": EXPOSURE_LEVEL,
+        "note": "no frame fixes the renders' level (events measure changes of log intensity): one "
+                f"gain in linear light puts the {EXPOSURE_PERCENTILE}th percentile of the requested "
+                f"renders at {EXPOSURE_LEVEL}"}, indent=2) + "\n")
+
+
+def read_exposure(run: Path) -> float:
+    """The gain of ``run/exposure.json``; 1 when the run has none (frames fixed its level)."""
+    from fusiongs.errors import InputError
+
+    path = run / EXPOSURE_FILE
+    if not path.is_file():
+        return 1.0
+    try:
+        gain = float(json.loads(path.read_text())["gain"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise InputError("fusiongs", str(path), "a JSON object with a number 'gain'", repr(e)) from None
+    if not (gain > 0 and np.isfinite(gain)):
+        raise InputError("fusiongs", f"{path}: gain", "a finite number > 0", repr(gain))
+    return gain
+
+
 def write_outputs(tr: Trained, scene: Scene, out: Path,
                   adjust: Callable[[np.ndarray], np.ndarray] | None = None,
                   kept: np.ndarray | None = None, colour: tuple[np.ndarray, np.ndarray] | None = None
@@ -113,8 +147,10 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     """Write renders, deblurred frames and video, model, config, thresholds and the refined
     camera path (``trajectory.txt``).
 
-    The deblurred frames are the renders at the frames' mid-exposure; with ``output.exposure_ratio``
-    on, they and every requested render inside a frame's exposure are exposure-ratio corrected
+    Without frames (and ``output.exposure`` auto) the renders get one linear gain
+    (:func:`fusiongs.train.render_io.exposure_gain`, written to ``exposure.json``) before they are
+    clipped. The deblurred frames are the renders at the frames' mid-exposure; with
+    ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure are exposure-ratio corrected
     (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the renders with ``colour``
     applied, so ``adjust`` is not applied to them again.
 
@@ -137,6 +173,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     keys = [r.name for r in scene.renders] + [f"deblur/{name}" for name in scene.frames.names]
     times = np.concatenate([np.asarray([r.t for r in scene.renders], np.float64), scene.frames.mid_times()])
     corrected: dict[str, np.ndarray] = {}
+    (out / EXPOSURE_FILE).unlink(missing_ok=True)  # an earlier event-only run's, in this folder
     if cfg.output.exposure_ratio and len(scene.frames):
         gains = frame_log_gains(state, len(scene.frames), kept)
         plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
@@ -145,6 +182,11 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
         srgb = linear_to_srgb(np.clip(plain, 0, 1)).astype(np.float32)
         fixed = linear_to_srgb(np.clip(fixed, 0, 1)).astype(np.float32)
         corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}
+    elif adjust is None and auto_exposure(cfg, len(scene.frames)):  # no level fixed: expose
+        lin = render_linear(state, scene.camera, times, cfg.backend)
+        gain = exposure_gain(lin)
+        write_exposure(out / EXPOSURE_FILE, gain)
+        srgb = exposed_srgb(lin, gain)
     else:
         srgb = render_srgb(state, scene.camera, times, cfg.backend)
     rendered = dict(zip(keys, srgb))

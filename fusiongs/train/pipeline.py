@@ -241,7 +241,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     outputs (deblurred frames, metrics) still cover every frame.
     """
     from fusiongs.events.thresholds import read_calibration, write_calibration
-    from fusiongs.train.outputs import write_outputs
+    from fusiongs.train.outputs import EXPOSURE_FILE, read_exposure, write_outputs
     from fusiongs.train.poses_stage import needs_pose_stage, run_pose_stage
 
     k = parse_holdout(holdout)
@@ -268,6 +268,9 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         kept if held.size else None, (anchor.gain, anchor.offset) if anchor.applied else None)
     if anchor.applied:
         log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
+    if (out / EXPOSURE_FILE).is_file():
+        log(f"exposure: renders x {read_exposure(out):.3g} in linear light (no frame fixes their level; "
+            f"{EXPOSURE_FILE}; output.exposure=none writes them as rendered)")
     n_it = max(tr.iteration, 1)
     h = tr.history
     log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "

@@ -11,16 +11,50 @@ from fusiongs.frames.image_io import read_image
 from fusiongs.frames.response import linear_to_srgb
 from fusiongs.train.state import FusionState
 
+#: Exposure of renders whose absolute level nothing fixes (event-only runs without a colour
+#: anchor): one gain in linear light puts this percentile of the rendered values ...
+EXPOSURE_PERCENTILE = 99.5
+#: ... at this level, so that no more than the brightest 0.5 % of values clip at white.
+EXPOSURE_LEVEL = 0.9
+
+
+def exposure_gain(linear: np.ndarray) -> float:
+    """One gain for linear renders ``[..., 3]`` whose level is arbitrary (events measure changes
+    of log intensity, so an event-only model's level is wherever its start put it): the
+    :data:`EXPOSURE_PERCENTILE` of all values goes to :data:`EXPOSURE_LEVEL` (a gain only, so
+    the ratios between pixels and channels, which the events do measure, are kept). Without it the
+    start's level decides what clips at white and is lost from the written images. 1 for renders
+    with no positive values."""
+    if not np.size(linear):
+        return 1.0
+    q = float(np.percentile(np.asarray(linear, dtype=np.float64), EXPOSURE_PERCENTILE))
+    return EXPOSURE_LEVEL / q if q > 0 and np.isfinite(q) else 1.0
+
 
 @torch.no_grad()
-def render_srgb(state: FusionState, camera, times, backend: str = "auto", batch: int = 8) -> np.ndarray:
-    """Sharp sRGB renders ``[T, H, W, 3]`` in [0, 1] at instants ``times`` (s)."""
+def render_linear(state: FusionState, camera, times, backend: str = "auto", batch: int = 8) -> np.ndarray:
+    """Sharp linear renders ``[T, H, W, 3]`` float32 (not clipped) at instants ``times`` (s)."""
     t = torch.as_tensor(np.asarray(times, dtype=np.float64))
     out = []
     for i in range(0, t.shape[0], batch):
         lin, _, _ = state.render(camera, t[i:i + batch], backend)
-        out.append(linear_to_srgb(lin.clamp(0, 1)).cpu().numpy())
+        out.append(lin.float().cpu().numpy())
     return np.concatenate(out) if out else np.zeros((0, camera.height, camera.width, 3), np.float32)
+
+
+def render_srgb(state: FusionState, camera, times, backend: str = "auto", batch: int = 8,
+                auto_exposure: bool = False, gain: float = 1.0) -> np.ndarray:
+    """Sharp sRGB renders ``[T, H, W, 3]`` in [0, 1] at instants ``times`` (s): times ``gain``,
+    or the :func:`exposure_gain` of these renders when ``auto_exposure``, then clipped to [0, 1]
+    in linear light."""
+    lin = render_linear(state, camera, times, backend, batch)
+    return exposed_srgb(lin, exposure_gain(lin) if auto_exposure else gain)
+
+
+def exposed_srgb(linear: np.ndarray, gain: float = 1.0) -> np.ndarray:
+    """float32 sRGB of linear renders ``[..., 3]`` times ``gain``, clipped to [0, 1] in linear light."""
+    lin = linear * np.float32(gain) if gain != 1.0 else linear
+    return np.asarray(linear_to_srgb(np.clip(lin, 0.0, 1.0)), dtype=np.float32)
 
 
 def read_gt(gt_dir: Path, names) -> dict[str, np.ndarray]:

@@ -198,6 +198,9 @@ class OutputSettings:
     exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (train/exposure_ratio.py)
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
     truth_every: int = 100           # PSNR against gt/ every N iterations (history.jsonl); 0 = off
+    exposure: Literal["auto", "none"] = "auto"  # scenes without frames: one linear gain puts the
+                                     # renders' 99.5th percentile at 0.9 (their level is arbitrary);
+                                     # none: as rendered (train/render_io.py: exposure_gain)
 
     def __post_init__(self) -> None:
         if not self.ratio_eps > 0:
@@ -206,6 +209,8 @@ class OutputSettings:
         if self.truth_every < 0:
             raise ConfigError("config", "output.truth_every", "an integer >= 0 (0 = off)",
                               repr(self.truth_every))
+        if self.exposure not in ("auto", "none"):
+            raise ConfigError("config", "output.exposure", "'auto' or 'none'", repr(self.exposure))
 
 
 @dataclass

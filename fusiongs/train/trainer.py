@@ -269,7 +269,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if (it + 1) % FLUSH_EVERY == 0:
                 flush_pending(history, pending, bar)
             if probe is not None and should_probe(it, cfg.output.truth_every, cfg.optim.iterations):
-                raw, fit = probe_psnr(state, data.camera, probe, cfg.backend)
+                raw, fit = probe_psnr(state, data.camera, probe, cfg.backend,
+                                      auto_exposure=auto_exposure(cfg, data.n_frames))
                 history.truth_iteration.append(it)
                 history.psnr_truth.append(raw)
                 history.psnr_truth_fit.append(fit)
@@ -360,6 +361,13 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
         print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
               f"{cfg.threshold.init}", file=sys.stderr)
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
+
+
+def auto_exposure(cfg: DeblurConfig, n_frames: int) -> bool:
+    """Whether renders get :func:`fusiongs.train.render_io.exposure_gain`: without frames (their
+    level is arbitrary: events measure changes of log intensity) unless ``output.exposure`` is
+    ``none``. With one frame the colour anchor fixes the level; with several, the blur loss."""
+    return n_frames == 0 and cfg.output.exposure == "auto"
 
 
 def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,

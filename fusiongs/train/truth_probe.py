@@ -5,7 +5,8 @@ Every ``output.truth_every`` iterations the current model is rendered at up to `
 truth instants (requested renders and frame mid-exposures, evenly chosen) and scored on 8-bit sRGB:
 as rendered, and after a per-channel affine fit (EventNeRF's protocol, the figure that means
 something for event-only runs). These are raw renders: no exposure-ratio correction and no colour
-anchor, so with frames the curve runs below the final ``metrics.json`` deblur figures.
+anchor, so with frames the curve runs below the final ``metrics.json`` deblur figures; without
+frames they get the outputs' exposure gain (``output.exposure``) of the probe's own renders.
 """
 
 from __future__ import annotations
@@ -49,10 +50,12 @@ def truth_probe(scene: Scene, max_views: int = MAX_VIEWS) -> TruthProbe | None:
                       np.stack([gt[k] for k, _ in chosen]).astype(np.float32))
 
 
-def probe_psnr(state: FusionState, camera, probe: TruthProbe, backend: str = "auto") -> tuple[float, float]:
-    """Mean PSNR (dB, 8-bit sRGB) of renders at the probe's instants: as rendered, and after a
-    per-channel affine fit to the truth."""
-    renders = render_srgb(state, camera, probe.times, backend)
+def probe_psnr(state: FusionState, camera, probe: TruthProbe, backend: str = "auto",
+               auto_exposure: bool = False) -> tuple[float, float]:
+    """Mean PSNR (dB, 8-bit sRGB) of renders at the probe's instants: as rendered (with the
+    outputs' exposure gain when ``auto_exposure``, :func:`~fusiongs.train.render_io.render_srgb`),
+    and after a per-channel affine fit to the truth."""
+    renders = render_srgb(state, camera, probe.times, backend, auto_exposure=auto_exposure)
     raw = [psnr(r, g) for r, g in zip(renders, probe.gt)]
     fit = [psnr(affine_fit(r, g), g) for r, g in zip(renders, probe.gt)]
     return float(np.mean(raw)), float(np.mean(fit))

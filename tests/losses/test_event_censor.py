@@ -5,7 +5,7 @@ import torch
 
 from fusiongs.events.stats import fast_event_mask
 from fusiongs.events.stream import EventStream
-from fusiongs.losses.event import censored_residual, event_loss_mse
+from fusiongs.losses.event import band_penalty, censored_residual, event_loss_band, event_loss_mse
 from fusiongs.sim.dvs import dvs_events
 
 
@@ -47,3 +47,28 @@ def test_refractory_edge_censored_loss_prefers_the_true_change():
     # a prediction short of the count is still penalised
     short = event_loss_mse(torch.tensor([[0.1]]), *args, censored=torch.tensor([[True]]))
     assert float(short) > 0.0
+
+
+def test_censored_band_penalises_only_the_shortfall():
+    """The band loss with censored counts (Event-3DGS Eq. 15, open on the far side): a rendered
+    change beyond a censored count costs nothing and gets no gradient, a shortfall costs as much as
+    uncensored, "no event" pixels and uncensored ones are unchanged (β = 0 and β = 0.5)."""
+    d_gt = torch.tensor([3.0, 3.0, -2.0, -2.0, 0.0, 3.0])
+    d_r = torch.tensor([4.5, 1.0, -3.5, -0.5, 1.7, 4.5], requires_grad=True)
+    cens = torch.tensor([True, True, True, True, True, False])
+    for beta in (0.0, 0.5):
+        got = band_penalty(d_r, d_gt, beta, censored=cens)
+        plain = band_penalty(d_r, d_gt, beta)
+        expect = torch.tensor([0.0, 2.0, 0.0, 1.5, 0.7, float(plain[5])])
+        assert torch.allclose(got, expect, atol=1e-6), (beta, got)
+        assert torch.allclose(got[[1, 3, 4, 5]], plain[[1, 3, 4, 5]])  # shortfalls, zeros, uncensored
+        grad, = torch.autograd.grad(got.sum(), d_r)
+        assert grad[0] == 0 and grad[2] == 0 and grad[1] < 0 and grad[3] > 0
+    # the loss passes the mask through, in log units with per-polarity thresholds
+    delta = torch.tensor([[0.9], [0.1]])
+    counts = torch.tensor([[3.0], [3.0]])
+    th = torch.tensor(0.2)
+    one_sided = event_loss_band(delta, counts, th, th, 0.0, censored=torch.tensor([[True], [True]]))
+    assert torch.isclose(one_sided, torch.tensor((0.0 + (3.0 - 0.5)) / 2))
+    assert torch.isclose(event_loss_band(delta, counts, th, th, 0.0),
+                         torch.tensor(((4.5 - 3.0) + (3.0 - 0.5)) / 2))

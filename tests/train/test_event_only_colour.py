@@ -101,6 +101,48 @@ def test_event_loss_ends_below_its_value_at_the_start_of_the_alpha_ramp(events_o
     assert "delta_e00" not in m["mean"]["novel"]["fusiongs"]  # raw colours of events alone mean nothing
 
 
+def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_only, one_frame, tmp_path):
+    """Without a frame the renders' level is arbitrary: one linear gain puts their 99.5th
+    percentile at 0.9 before the clip (exposure.json), `fusiongs render` applies the same gain,
+    output.exposure=none writes them as rendered, and a run with a frame writes no gain (and
+    removes an earlier run's from its folder)."""
+    from fusiongs.frames.response import srgb_to_linear
+    from fusiongs.train.render_io import EXPOSURE_LEVEL, exposure_gain, render_linear
+    from fusiongs.train.restore import restore_state
+
+    short = ["optim.iterations=6", "events.pixels=256"]
+    run = tmp_path / "auto"
+    _deblur(events_only, run, *short)
+    gain = json.loads((run / "exposure.json").read_text())["gain"]
+    meta = json.loads((events_only / "scene.json").read_text())
+    names = [r["name"] for r in meta["renders"]]
+    times = [r["t"] for r in meta["renders"]]
+    state, camera, _ = restore_state(run / "checkpoint.pt")
+    lin = render_linear(state, camera, times, "auto")
+    assert gain == pytest.approx(exposure_gain(lin)) and gain != pytest.approx(1.0, abs=0.05)
+    written = np.stack([srgb_to_linear(read_image(run / "renders" / f"{n}.png")) for n in names])
+    assert np.percentile(written, 99.5) == pytest.approx(EXPOSURE_LEVEL, abs=0.02)
+    np.testing.assert_allclose(written, np.clip(lin * gain, 0, 1), atol=0.01)
+    # fusiongs render of the same instant matches the written render
+    assert main(["render", str(run), "--t", repr(times[0]), "-o", str(tmp_path / "r")]) == 0
+    again = read_image(next((tmp_path / "r").glob("*.png")))
+    np.testing.assert_allclose(again, read_image(run / "renders" / f"{names[0]}.png"), atol=1.5 / 255)
+    # as rendered when asked
+    plain = tmp_path / "plain"
+    _deblur(events_only, plain, *short, "output.exposure=none")
+    assert not (plain / "exposure.json").exists()
+    ref = np.stack([srgb_to_linear(read_image(plain / "renders" / f"{n}.png")) for n in names])
+    np.testing.assert_allclose(ref, np.clip(lin, 0, 1), atol=0.01)
+    # a frame fixes the level: no gain, and none left over from the event-only run in that folder
+    _deblur(one_frame, run, *short)
+    assert not (run / "exposure.json").exists()
+    from fusiongs.errors import ConfigError
+    from fusiongs.train.settings import OutputSettings
+
+    with pytest.raises(ConfigError, match="output.exposure"):
+        OutputSettings(exposure="max")
+
+
 def _one_line_exit_2(argv, capfd) -> str:
     assert main(argv) == 2
     err = capfd.readouterr().err.strip().splitlines()
