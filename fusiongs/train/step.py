@@ -115,7 +115,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     th = state.threshold
     t_mid = 0.5 * (t_a + t_b)  # for a drifting θ
     censored = None  # [P, 1] counts that are lower bounds (grey and mask modes)
-    if ev.loss == "mse" and (data.cfa_index is None or ev.colour_mode == "mask"):
+    if ev.loss in ("mse", "band") and (data.cfa_index is None or ev.colour_mode == "mask"):
         cens = data.censored_map(t_a, t_b, ev.censor_radius)
         censored = None if cens is None else cens.reshape(-1)[full_pix, None]
     if data.cfa_index is None:  # grey sensor: I = w · L
@@ -143,7 +143,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
     if ev.loss == "mse":
         return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights, censored)
     if ev.loss == "band":
-        return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights)
+        return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights, censored=censored)
     return event_loss_pvc(d, d_gt, th_p, th_n, kind="band", beta=ev.beta, channel_weights=weights)
 
 

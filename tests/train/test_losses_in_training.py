@@ -121,6 +121,27 @@ def test_censored_counts_train_on_a_refractory_sensor(tmp_path):
     off = resolve_config(None, BASE + ["events.censor=0", "threshold.estimate=false"])
     assert train(scene(2e-3, None), off, tmp_path / "off").data.fast is None
 
+    # the band loss (event-only's) gets the censored pixels too, in grey and mask mode
+    import fusiongs.train.step as step
+
+    seen = []
+    real = step.event_loss_band
+
+    def spy(*args, censored=None, **kwargs):
+        seen.append(censored)
+        return real(*args, censored=censored, **kwargs)
+
+    band = resolve_config(None, BASE + ["events.censor=2.0", "threshold.estimate=false", "events.loss=band"])
+    try:
+        step.event_loss_band = spy
+        for cfa in (None, "RGGB"):
+            seen.clear()
+            train(scene(2e-3, cfa), band, tmp_path / f"band{cfa}")
+            assert seen and all(c is not None for c in seen)
+            assert any(bool(c.any()) for c in seen) and not all(bool(c.all()) for c in seen)
+    finally:
+        step.event_loss_band = real
+
 
 def test_threshold_pull_is_for_scenes_without_frames_only():
     """``threshold.regularise`` pulls θ toward its start only when no frame fixes its scale: with a
