@@ -150,9 +150,9 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     Without frames (and ``output.exposure`` auto) the renders get one linear gain
     (:func:`fusiongs.train.render_io.exposure_gain`, written to ``exposure.json``) before they are
     clipped. The deblurred frames are the renders at the frames' mid-exposure; with
-    ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure are exposure-ratio corrected
-    (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the renders with ``colour``
-    applied, so ``adjust`` is not applied to them again.
+    ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure are
+    exposure-ratio corrected (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the
+    renders with ``colour`` applied, so ``adjust`` is not applied to them again.
 
     Args:
         adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
