@@ -13,7 +13,7 @@ from fusiongs.atomic import write_text
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples, write_tum
 from fusiongs.frames.image_io import write_png
-from fusiongs.frames.response import linear_to_srgb, response_to_linear
+from fusiongs.frames.response import response_to_linear
 from fusiongs.io.scene import Scene
 from fusiongs.scene.ply import save_ply
 from fusiongs.train.config import save_config
@@ -40,7 +40,7 @@ def frames_srgb(scene: Scene) -> np.ndarray:
     lin = response_to_linear(f.images.astype(np.float64), f.response)
     if lin.shape[-1] == 1:
         lin = np.repeat(lin, 3, axis=-1)
-    return linear_to_srgb(np.clip(lin, 0, 1)).astype(np.float32)
+    return exposed_srgb(lin)
 
 
 def write_thresholds(state: FusionState, path: Path) -> dict:
@@ -131,12 +131,13 @@ def read_exposure(run: Path) -> float:
     path = run / EXPOSURE_FILE
     if not path.is_file():
         return 1.0
+    expected = "a JSON object whose 'gain' is a finite number > 0"
     try:
         gain = float(json.loads(path.read_text())["gain"])
     except (ValueError, KeyError, TypeError) as e:
-        raise InputError("fusiongs", str(path), "a JSON object with a number 'gain'", repr(e)) from None
+        raise InputError(path, "gain", expected, f"{type(e).__name__}: {e}") from None
     if not (gain > 0 and np.isfinite(gain)):
-        raise InputError("fusiongs", f"{path}: gain", "a finite number > 0", repr(gain))
+        raise InputError(path, "gain", expected, repr(gain))
     return gain
 
 
@@ -179,8 +180,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
         plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
                                                 cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend,
                                                 colour)
-        srgb = linear_to_srgb(np.clip(plain, 0, 1)).astype(np.float32)
-        fixed = linear_to_srgb(np.clip(fixed, 0, 1)).astype(np.float32)
+        srgb, fixed = exposed_srgb(plain), exposed_srgb(fixed)
         corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}
     elif adjust is None and auto_exposure(cfg, len(scene.frames)):  # no level fixed: expose
         lin = render_linear(state, scene.camera, times, cfg.backend)

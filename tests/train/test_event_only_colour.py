@@ -101,7 +101,8 @@ def test_event_loss_ends_below_its_value_at_the_start_of_the_alpha_ramp(events_o
     assert "delta_e00" not in m["mean"]["novel"]["fusiongs"]  # raw colours of events alone mean nothing
 
 
-def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_only, one_frame, tmp_path):
+def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_only, one_frame, tmp_path,
+                                                                          capfd):
     """Without a frame the renders' level is arbitrary: one linear gain puts their 99.5th
     percentile at 0.9 before the clip (exposure.json), `fusiongs render` applies the same gain,
     output.exposure=none writes them as rendered, and a run with a frame writes no gain (and
@@ -127,6 +128,15 @@ def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_
     assert main(["render", str(run), "--t", repr(times[0]), "-o", str(tmp_path / "r")]) == 0
     again = read_image(next((tmp_path / "r").glob("*.png")))
     np.testing.assert_allclose(again, read_image(run / "renders" / f"{names[0]}.png"), atol=1.5 / 255)
+    # a corrupt or wrong exposure.json: one line naming the file and the key, exit 2
+    saved = (run / "exposure.json").read_text()
+    for bad in ("{not json", '{"gain": -2}', '["gain"]'):
+        (run / "exposure.json").write_text(bad)
+        capfd.readouterr()
+        assert main(["render", str(run), "--t", repr(times[0]), "-o", str(tmp_path / "bad")]) == 2
+        err = capfd.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "exposure.json: gain: expected" in err[0], err
+    (run / "exposure.json").write_text(saved)
     # as rendered when asked
     plain = tmp_path / "plain"
     _deblur(events_only, plain, *short, "output.exposure=none")
