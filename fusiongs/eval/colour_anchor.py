@@ -176,11 +176,10 @@ def anchor_run(state, scene, cfg) -> ColourAnchor:
     fs = scene.frames
     if len(fs) != 1:
         return ColourAnchor()
-    device = state.model.means.device
     renders = []
     with torch.no_grad():
         for s, e in zip(fs.t_start, fs.t_end):
-            t = exposure_instants(float(s), float(e), cfg.blur.n_samples).to(device)
+            t = exposure_instants(float(s), float(e), cfg.blur.n_samples)  # instants stay on the host
             lin, _, _ = state.render(scene.camera, t, cfg.backend)
             renders.append(lin.clamp(0, 1).mean(0).cpu().numpy())  # as the outputs are clipped
     try:

@@ -103,12 +103,12 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         if i < 0:
             for j in range(0, at.size, 8):
                 batch = at[j:j + 8]
-                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[batch]).to(device), backend)
+                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[batch]), backend)
                 rendered[batch] = corrected[batch] = lin.cpu().numpy()
             continue
         t = torch.cat([exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples),
                        torch.as_tensor(times[at])])
-        raw, _, _ = state.render(scene.camera, t.to(device), backend)
+        raw, _, _ = state.render(scene.camera, t, backend)
         lin = raw
         if colour is not None:  # as the anchor was fitted and is applied: on renders clipped to [0, 1]
             gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(device) for v in colour)

@@ -184,7 +184,6 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
         from fusiongs.eval.calibrate import estimate_thresholds
 
         theta = estimate_thresholds(frame_subset(fs, kept), events)
-    device = state.model.means.device
     log_g = frame_log_gains(state, len(fs), kept)[int(held[0])]  # held-out frames: the mean gain
     gain = float(log_g.exp())
 
@@ -197,7 +196,7 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
     for i in (int(v) for v in held):
         s, e, name = float(fs.t_start[i]), float(fs.t_end[i]), fs.names[i]
         with torch.no_grad():
-            renders, _, _ = state.render(scene.camera, exposure_instants(s, e, n).to(device), cfg.backend)
+            renders, _, _ = state.render(scene.camera, exposure_instants(s, e, n), cfg.backend)
             ours = predict_blurry(renders, log_g, fs.response, fs.images.shape[-1], cfg.events.grey_weights)
         near = nearest_kept(mids, kept, i)
         preds = {"fusiongs": ours.cpu().numpy(), "nearest": fs.images[near], "edi_carried": None}

@@ -21,7 +21,13 @@ class FusionState(nn.Module):
 
     Attributes:
         model: the Gaussians; their colour is linear radiance (SH, gsplat's ``+0.5`` convention).
-        trajectory: camera-to-world poses in time, with learnable knot corrections.
+        trajectory: camera-to-world poses in time, with learnable knot corrections. Built on the
+            host (:func:`~fusiongs.train.trainer.build_trajectory`) whatever the device of the
+            Gaussians: a render's poses are a few dozen 4x4 matrices through some 400 small ops
+            (SE(3) log and exp of the B-spline) and as many backward nodes, which on a GPU are
+            that many kernel launches for a kilobyte of arithmetic, a third of a training step's
+            launches (RESULTS.md, session 23); on the host they cost microseconds each, and only
+            the ``[T, 4, 4]`` view matrices cross to the device (their gradient back).
         threshold: contrast thresholds θ = exp(s) per polarity (and per colour channel).
         log_gain: ``[F]`` log exposure gains g_i (zeros; learnable when configured).
         depth_far: far bound of the initialisation (scene units; sizes the scene extent).
@@ -41,12 +47,15 @@ class FusionState(nn.Module):
                check_values: bool = True) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
         """Sharp linear renders at instants ``t`` ``[T]`` (s): ``([T, H, W, 3], alphas, meta)``.
 
-        ``t`` should be on the model's device (a host ``t`` is copied there and waits for the
-        device); ``check_values=False`` skips the rasteriser's value checks (host syncs on a GPU).
+        ``t`` should be on the trajectory's device (the host, see the class docstring; a ``t`` on
+        another device is copied there, which waits for it); ``check_values=False`` skips the
+        rasteriser's value checks (host syncs on a GPU).
         """
         m = self.model
         device = m.means.device
-        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device=device, dtype=m.means.dtype)
+        # the view matrices are made where the trajectory lives and copied without waiting
+        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(dtype=m.means.dtype)
+        viewmats = viewmats.to(device, non_blocking=True)
         # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
         K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
         Ks = K.expand(viewmats.shape[0], 3, 3)
@@ -183,7 +192,7 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
         t_init = data.exposures.mean(dim=1)
     else:
         t_init = torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64,
-                                device=device)
+                                device=trajectory.knots.device)
     with torch.no_grad():
         c2w = trajectory.c2w(t_init).to(torch.float32)
     model, far = initial_gaussians(data, c2w, cfg, gen, init_images, fill)
@@ -196,5 +205,6 @@ def build_state(data: TrainData, poses_c2w: np.ndarray, trajectory: Trajectory, 
     threshold = ContrastThreshold(channels=channels, init=theta_init, grid=th.grid,
                                   image_size=(data.camera.height, data.camera.width),
                                   time_knots=th.time_knots, time_range=data.t_range)
-    return FusionState(model, trajectory, threshold, data.n_frames, cfg.blur.learn_gain,
-                       depth_far=far).to(device)
+    # the trajectory stays where it was built (the host; see FusionState)
+    return FusionState(model.to(device), trajectory, threshold.to(device), data.n_frames,
+                       cfg.blur.learn_gain, depth_far=far)

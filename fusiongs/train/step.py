@@ -247,10 +247,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                 readout = nearest_readout(data.hpf_times, free[:, 1])
         times.append(free.reshape(-1))
     t_host = torch.cat(times)  # [T] float64 s, on the host
-    device = state.model.means.device
     t0 = time.perf_counter()
-    lin, _, meta = state.render(camera, t_host.to(device, non_blocking=True), cfg.backend,
-                                check_values=False)
+    lin, _, meta = state.render(camera, t_host, cfg.backend, check_values=False)  # poses on the host
     render_seconds = time.perf_counter() - t0
     parts: dict[str, torch.Tensor] = {}
     loss = lin.new_zeros(())

@@ -116,10 +116,11 @@ def training_device(name: str) -> torch.device:
     return device
 
 
-def build_trajectory(scene: Scene, cfg: DeblurConfig, device: torch.device) -> Trajectory:
-    """The scene's poses as a refinable trajectory (clamped outside its time range)."""
+def build_trajectory(scene: Scene, cfg: DeblurConfig) -> Trajectory:
+    """The scene's poses as a refinable trajectory (clamped outside its time range), on the host
+    whatever the training device (:class:`~fusiongs.train.state.FusionState` says why)."""
     return Trajectory(scene.poses, mode=cfg.trajectory, refine=cfg.optim.refine_poses,
-                      knot_spacing=cfg.knot_spacing or None, outside="clamp", device=device)
+                      knot_spacing=cfg.knot_spacing or None, outside="clamp", device="cpu")
 
 
 def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator,
@@ -193,7 +194,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.fast = censor_events(data, cfg, theta0, device)
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
-    trajectory = build_trajectory(scene, cfg, device)
+    trajectory = build_trajectory(scene, cfg)
     fill = frame_colour(scene, data, cfg)
     colour_scale = colour_lr_scale(fill)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),

@@ -51,7 +51,7 @@ def test_coarse_camera_maps_points_to_half_the_pixel_coordinates():
 def test_coarse_step_renders_small_and_refuses_events(scene, generator):
     cfg = resolve_config(None, BASE)
     data = prepare_data(scene, torch.device("cpu"), True)
-    state = build_state(data, scene.poses.c2w, build_trajectory(scene, cfg, torch.device("cpu")),
+    state = build_state(data, scene.poses.c2w, build_trajectory(scene, cfg),
                         cfg, torch.device("cpu"))
     res = training_step(state, data, cfg, 0, 0.0, generator, coarse=2)
     assert res.renders.shape[1:3] == (9, 12)
@@ -65,7 +65,7 @@ def test_coarse_step_renders_small_and_refuses_events(scene, generator):
 def test_coarse_steps_use_their_own_number_of_exposure_samples(scene, generator):
     cfg = resolve_config(None, BASE + ["blur.n_samples=7", "blur.coarse_n_samples=3"])
     data = prepare_data(scene, torch.device("cpu"), True)
-    state = build_state(data, scene.poses.c2w, build_trajectory(scene, cfg, torch.device("cpu")),
+    state = build_state(data, scene.poses.c2w, build_trajectory(scene, cfg),
                         cfg, torch.device("cpu"))
     assert training_step(state, data, cfg, 0, 0.0, generator, coarse=2).renders.shape[0] == 3
     assert training_step(state, data, cfg, 0, 0.0, generator, coarse=1).renders.shape[0] == 7

@@ -263,6 +263,7 @@ def test_cuda_training_matches_the_cpu_and_names_its_devices(case, scenes, tmp_p
     cfg = resolve_config(None, BASE + extra + SAME_DRAWS + ["device=cuda"])
     gpu, audit = audited_train(scenes[scene], cfg, tmp_path / "cuda", monkeypatch)
     assert gpu.state.model.means.device.type == "cuda"
+    assert gpu.state.trajectory.knots.device.type == "cpu", "poses are computed on the host by design"
     assert not audit.implicit, "\n".join(sorted(set(audit.implicit)))
     for name in ("loss", "blur", "event"):
         a, b = getattr(cpu.history, name), getattr(gpu.history, name)

@@ -49,7 +49,7 @@ def test_stereo_on_event_images_puts_the_points_on_the_surfaces(wall_events):
     images = init_images(wall_events, data, cfg)
     assert images is not None and images.shape[0] == EVENT_ONLY_VIEWS
     with torch.no_grad():
-        c2w = build_trajectory(wall_events, cfg, torch.device("cpu")).c2w(
+        c2w = build_trajectory(wall_events, cfg).c2w(
             torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64)).float()
     xyz, _, _ = stereo_points(images, c2w, data.camera, cfg.init.depth_min, cfg.init.depth_max,
                               min_confidence=cfg.init.stereo_min_confidence)
@@ -68,7 +68,7 @@ def test_random_initialisation_without_frames_uses_no_images(wall_events):
     data = prepare_data(wall_events, torch.device("cpu"), True)
     assert init_images(wall_events, data, cfg) is None
     with torch.no_grad():
-        c2w = build_trajectory(wall_events, cfg, torch.device("cpu")).c2w(
+        c2w = build_trajectory(wall_events, cfg).c2w(
             torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64)).float()
     model, _ = initial_gaussians(data, c2w, cfg, torch.Generator().manual_seed(0), None)
     zm = model.means[:, 2].detach().numpy()
@@ -95,7 +95,7 @@ def test_a_single_frame_starts_from_the_events_stereo_and_two_frames_from_the_fr
     assert event_stereo_start(data, cfg)
     images = init_images(one, data, cfg)
     assert images is not None and images.shape[0] == EVENT_ONLY_VIEWS
-    traj = build_trajectory(one, cfg, torch.device("cpu"))
+    traj = build_trajectory(one, cfg)
     state = build_state(data, None, traj, cfg, torch.device("cpu"), init_images=images)
     zm = state.model.means[:, 2].detach().numpy()
     assert np.mean((zm > 2.6) & (zm < 6.2)) > 0.5  # on the surfaces, as without frames
@@ -130,7 +130,7 @@ def test_a_single_frame_gives_the_first_gaussians_its_mean_colour(tmp_path):
     assert fill is not None and fill.shape == (3,) and fill.dtype == torch.float32
     np.testing.assert_allclose(fill.numpy(), want, rtol=1e-5)
     assert float(np.ptp(want)) > 0.1 * float(want.mean()) and abs(float(want.mean()) - 0.5) > 0.05  # not grey
-    traj = build_trajectory(one, cfg, torch.device("cpu"))
+    traj = build_trajectory(one, cfg)
     grey = build_state(data, None, traj, cfg, torch.device("cpu"), init_images=init_images(one, data, cfg))
     tinted = build_state(data, None, traj, cfg, torch.device("cpu"),
                          init_images=init_images(one, data, cfg, fill), fill=fill)
