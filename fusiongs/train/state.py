@@ -54,8 +54,7 @@ class FusionState(nn.Module):
         m = self.model
         device = m.means.device
         # the view matrices are made where the trajectory lives and copied without waiting
-        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(dtype=m.means.dtype)
-        viewmats = viewmats.to(device, non_blocking=True)
+        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
         # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
         K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
         Ks = K.expand(viewmats.shape[0], 3, 3)
