@@ -30,6 +30,7 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import fusiongs.train.trainer as trainer  # noqa: E402
+from fusiongs.errors import InputError  # noqa: E402
 from fusiongs.io import load_scene  # noqa: E402
 from fusiongs.train.pipeline import resolve_config  # noqa: E402
 
@@ -67,8 +68,13 @@ def main(argv=None) -> int:
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("overrides", nargs="*")
     a = ap.parse_intermixed_args(argv)
-    cfg = resolve_config(a.config, ["output.progress=false", "output.checkpoint_every=0", *a.overrides])
-    scene = load_scene(a.scene)
+    try:
+        cfg = resolve_config(a.config, ["output.progress=false", "output.checkpoint_every=0", *a.overrides])
+        scene = load_scene(a.scene)
+        trainer.check_device(cfg.device)
+    except InputError as e:  # a bad scene folder, config name or override: one line
+        print(f"bench_pose_placement: {e}", file=sys.stderr)
+        return 2
     rows = []
     for _ in range(a.repeats):
         for on_device in (False, True):

@@ -20,7 +20,7 @@ from fusiongs.io.scene import Scene
 from fusiongs.io.scene_io import load_scene
 from fusiongs.train.config import load_config
 from fusiongs.train.settings import DeblurConfig
-from fusiongs.train.trainer import Trained, train
+from fusiongs.train.trainer import Trained, check_device, train
 
 EVENT_ONLY_NOTE = ("event-only reconstruction: events fix log-intensity changes, not absolute "
                    "brightness or colour balance; renders are defined up to a per-channel scale and "
@@ -245,6 +245,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
 
     k = parse_holdout(holdout)
     cfg = resolve_config(config, overrides)
+    check_device(cfg.device)  # before the calibration and the pose stage spend minutes
     calib = read_calibration(calibration)[0] if calibration is not None else None
     scene = load_scene(scene_path)
     held, kept = split_holdout(scene, k)

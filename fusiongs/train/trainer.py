@@ -23,7 +23,7 @@ import torch
 
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
-from fusiongs.errors import InputError
+from fusiongs.errors import ConfigError, InputError
 from fusiongs.events.thresholds import SensorThresholds
 from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
@@ -102,6 +102,21 @@ def _set_learning_rates(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfi
             g["lr"] = log_linear_lr(max(it - o.pose_start, 0), o.lr_pose, o.lr_pose_final, span)
 
 
+def check_device(name: str) -> None:
+    """Raise :class:`ConfigError` (one line, before any work) when ``device`` names no device this
+    machine has: not a torch device string, or CUDA without a usable card."""
+    try:
+        device = torch.device(name)
+    except (RuntimeError, TypeError):
+        raise ConfigError("config", "device", "a torch device such as 'cpu', 'cuda' or 'cuda:0'",
+                          repr(name)) from None
+    if device.type == "cuda":
+        n = torch.cuda.device_count() if torch.cuda.is_available() else 0
+        if n == 0 or (device.index is not None and device.index >= n):
+            raise ConfigError("config", "device", f"a CUDA device this machine has ({n} found; "
+                              "device=cpu runs anywhere)", repr(name))
+
+
 def training_device(name: str) -> torch.device:
     """``torch.device(name)`` with the card named: ``"cuda"`` becomes ``cuda:<current device>``.
 
@@ -173,6 +188,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     """
     from tqdm import tqdm
 
+    check_device(cfg.device)
     device = training_device(cfg.device)
     torch.manual_seed(cfg.seed)
     # `gen` (host) draws what the host needs as numbers: the frame order, event window times,

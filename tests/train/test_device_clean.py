@@ -25,7 +25,7 @@ import torch
 from torch.overrides import TorchFunctionMode
 
 import fusiongs
-from fusiongs.errors import InputError
+from fusiongs.errors import ConfigError, InputError
 from fusiongs.render.gsplat_backend import gsplat_available
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.train.data import prepare_data
@@ -305,3 +305,22 @@ def test_the_training_device_names_its_card():
     assert training_device("cuda:1") == torch.device("cuda", 1)  # named: kept, CUDA not touched
     if has_cuda():
         assert training_device("cuda") == torch.device("cuda", torch.cuda.current_device())
+
+
+def test_a_device_the_machine_lacks_is_one_line_before_any_work(tiny_scene, tmp_path, capfd):
+    """``device=`` naming no device this machine has: one line naming the key, exit 2, and nothing
+    run or written (the calibration and the pose stage come before training and take minutes)."""
+    from fusiongs.cli import main
+    from fusiongs.train.trainer import check_device
+
+    check_device("cpu")
+    bad = ["nonsense", "cuda:99"] + ([] if has_cuda() else ["cuda", "cuda:0"])
+    for name in bad:
+        with pytest.raises(ConfigError, match="device: expected"):
+            check_device(name)
+    out = tmp_path / "out"
+    capfd.readouterr()
+    assert main(["deblur", str(tiny_scene), "-o", str(out), "device=nonsense"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "device: expected a torch device" in err[0], err
+    assert not out.exists() or not any(out.iterdir())
