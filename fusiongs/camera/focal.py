@@ -95,7 +95,7 @@ def _behind_share(rec) -> float:
 
 
 def profile_focal(rec, guess: float, *, octaves: float = 2.0, steps_per_octave: int = 2,
-                  min_rise: float = 0.01, threads: int = 2):
+                  min_rise: float = 0.01, threads: int = 1):
     """Profile the reprojection error over focal lengths ``guess x 2^(k / steps_per_octave)`` for
     ``|k| <= octaves x steps_per_octave`` and return the adjusted model with its focal length.
 

@@ -18,7 +18,7 @@ from fusiongs.errors import InputError, MissingDependencyError
 
 
 def estimate_poses(image_dir: str | Path, camera: PinholeCamera, work_dir: str | Path, *,
-                   sequential: bool = True, threads: int = 2, seed: int = 0) -> dict[str, np.ndarray]:
+                   sequential: bool = True, threads: int = 1, seed: int = 0) -> dict[str, np.ndarray]:
     """Register the images of ``image_dir`` with pycolmap (SIFT, fixed PINHOLE intrinsics).
 
     Args:
@@ -27,7 +27,8 @@ def estimate_poses(image_dir: str | Path, camera: PinholeCamera, work_dir: str |
         work_dir: folder for COLMAP's database and sparse model (created; a previous database is
             replaced).
         sequential: sequential matching (video order) instead of exhaustive.
-        threads, seed: COLMAP's CPU threads and random seed.
+        threads, seed: COLMAP's CPU threads and random seed (one thread: the same poses on every
+            run; COLMAP's matching with several threads is not deterministic).
 
     Returns:
         ``{image stem: c2w [4, 4] float64}`` for the registered images of the largest model, in
@@ -53,10 +54,10 @@ def estimate_poses(image_dir: str | Path, camera: PinholeCamera, work_dir: str |
     pycolmap.extract_features(db, image_dir, camera_mode=pycolmap.CameraMode.SINGLE,
                               reader_options=reader, extraction_options=extract,
                               device=pycolmap.Device.cpu)
-    if sequential:
-        pycolmap.match_sequential(db, device=pycolmap.Device.cpu)
-    else:
-        pycolmap.match_exhaustive(db, device=pycolmap.Device.cpu)
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = threads
+    match = pycolmap.match_sequential if sequential else pycolmap.match_exhaustive
+    match(db, matching_options=matching, device=pycolmap.Device.cpu)
     opts = pycolmap.IncrementalPipelineOptions()
     opts.ba_refine_focal_length = False
     opts.ba_refine_principal_point = False
