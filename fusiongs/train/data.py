@@ -52,6 +52,7 @@ class TrainData:
     pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
     event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
     fast: torch.Tensor | None = None  # [E] bool: a fast event (censored counts), on the device
+    hot: torch.Tensor | None = None  # [H, W] bool hot pixels (train/lowpass_term.py), on the device
 
     _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
 

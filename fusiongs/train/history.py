@@ -17,7 +17,7 @@ from fusiongs.errors import InputError
 from fusiongs.train.state import FusionState
 
 FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
-TERMS = ("blur", "event", "edi", "intensity")  # the loss terms recorded (StepResult.parts keys)
+TERMS = ("blur", "event", "event_lowpass", "edi", "intensity")  # terms recorded (StepResult.parts keys)
 
 
 @dataclass
@@ -30,6 +30,7 @@ class History:
     loss: list[float] = field(default_factory=list)
     blur: list[float] = field(default_factory=list)
     event: list[float] = field(default_factory=list)
+    event_lowpass: list[float] = field(default_factory=list)  # low-pass term of long windows
     edi: list[float] = field(default_factory=list)
     intensity: list[float] = field(default_factory=list)  # event-only mode's HPF anchor term
     theta_pos: list[list[float]] = field(default_factory=list)

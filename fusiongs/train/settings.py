@@ -111,9 +111,15 @@ class EventSettings:
     censor: float = 2.0              # counts of pixels with two events closer than this multiple of
                                      # the estimated dead time are lower bounds (one-sided mse); 0 off
     censor_radius: int = 0           # ... and those of their neighbours within this many pixels
+    lowpass_weight: float = 0.0      # weight of the low-pass term on long windows between the free
+                                     # windows' ends (train/lowpass_term.py; scenes without frames,
+                                     # where nothing else fixes large scales); 0 off
+    lowpass_sigma: float = 4.0       # its Gaussian (pixels)
 
     def __post_init__(self) -> None:
-        _need_positive("events", self, ("censor", "max_window", "window_events"), zero_ok=True)
+        _need_positive("events", self, ("censor", "max_window", "window_events", "lowpass_weight"),
+                       zero_ok=True)
+        _need_positive("events", self, ("lowpass_sigma",))
         if self.censor_radius < 0:
             raise ConfigError("config", "events.censor_radius", "an integer >= 0", repr(self.censor_radius))
 

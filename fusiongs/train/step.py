@@ -32,6 +32,7 @@ from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.crop import Crop
 from fusiongs.train.data import TrainData, block_mean
+from fusiongs.train.lowpass_term import lowpass_term
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
@@ -198,7 +199,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
 
     With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
     (event-only mode): ``α · L_ev + (1 − α) · L_intensity`` on free windows, with ``lam_ev`` = α
-    and the HPF intensity image at each window's end as the anchor (Event-3DGS).
+    and the HPF intensity image at each window's end as the anchor (Event-3DGS), plus
+    ``α · events.lowpass_weight · L_lowpass`` on the long windows between two free windows' ends
+    (:mod:`fusiongs.train.lowpass_term`).
 
     Args:
         frame: index of the frame whose exposure is rendered (ignored without frames).
@@ -280,6 +283,12 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                        for j, k, ta, tb in windows) / len(windows)
             loss = loss + lam_ev * l_ev
             parts["event"] = l_ev.detach()
+        if lam_ev > 0 and cfg.events.lowpass_weight > 0 and not has_frames and len(free):
+            ends = [(base + 2 * i + k, t, i) for i, ab in enumerate(free.tolist()) for k, t in enumerate(ab)]
+            l_lp = lowpass_term(state, data, cfg, lin, ends, longest)
+            if l_lp is not None:
+                loss = loss + lam_ev * cfg.events.lowpass_weight * l_lp
+                parts["event_lowpass"] = l_lp.detach()
         if readout is not None:
             readout = readout.tolist()
             seen = [own_channel(lin[base + 2 * i + 1], data, cfg.events.grey_weights)

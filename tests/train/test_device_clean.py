@@ -54,6 +54,7 @@ HOST_SIDE = {
     ("fusiongs/train/data.py", "pvc_readouts"): "numpy -> tensor, once",
     ("fusiongs/train/data.py", "edi_images"): "numpy -> tensor, once",
     ("fusiongs/train/data.py", "fast_events"): "numpy -> tensor, once (the censored counts' events)",
+    ("fusiongs/train/lowpass_term.py", "hot_map"): "numpy -> tensor, once (then .to(device))",
     ("fusiongs/train/trainer.py", "init_images"): "numpy -> tensor for the host stereo, once",
     ("fusiongs/losses/colour.py", "cfa_index"): "numpy -> tensor, once (then .to(device))",
     # checkpoints hold host tensors by definition (written every checkpoint_every iterations)
@@ -168,7 +169,9 @@ CASES = {  # scene, overrides: together every training-time stage
     "colour-pvc-demosaic": ("colour", ["events.loss=pvc", "events.colour_mode=demosaic"]),
     "colour-mse-mask": ("colour", ["events.colour_mode=mask"]),
     "event-only": ("events", ["event_only.alpha_warmup=1", "event_only.alpha_ramp=2",
-                              "event_only.hpf_readouts=12", "threshold.regularise=0.1"]),
+                              "event_only.hpf_readouts=12", "threshold.regularise=0.1",
+                              "events.windows_free=2", "events.max_window=0.02",
+                              "events.lowpass_weight=1"]),
 }
 
 
@@ -224,16 +227,18 @@ def test_records_are_read_back_together_and_a_diverged_loss_stops_training():
 
     h, bar = History(), Bar()
     nan = math.nan
-    pending = [PendingRow(0, torch.tensor([1.0, 0.5, nan, nan, nan, 20.0, 0.2, 0.3]), 10, 0.0),
-               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, nan, 0.05, 21.0, 0.21, 0.31]), 12, 0.1)]
+    # loss, blur, event, event_lowpass, edi, intensity, psnr_input, θ+, θ−
+    pending = [PendingRow(0, torch.tensor([1.0, 0.5, nan, nan, nan, nan, 20.0, 0.2, 0.3]), 10, 0.0),
+               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, 0.07, nan, 0.05, 21.0, 0.21, 0.31]), 12, 0.1)]
     flush_pending(h, pending, bar)
     assert not pending and h.iteration == [0, 1] and h.n_gaussians == [10, 12]
     assert h.loss == pytest.approx([1.0, 0.9]) and math.isnan(h.event[0]) and h.event[1] == pytest.approx(0.1)
     assert h.theta_pos == [[pytest.approx(0.2)], [pytest.approx(0.21)]] and bar.postfix["n"] == 12
     assert h.theta_neg == [[pytest.approx(0.3)], [pytest.approx(0.31)]] and h.psnr_input[1] == 21.0
     assert math.isnan(h.intensity[0]) and h.intensity[1] == pytest.approx(0.05)
+    assert math.isnan(h.event_lowpass[0]) and h.event_lowpass[1] == pytest.approx(0.07)
     with pytest.raises(InputError, match="nan at iteration 2"):
-        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 8), 12, 0.1)], bar)
+        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 9), 12, 0.1)], bar)
 
 
 # ------------------------------------------------------------------------------------------- CUDA

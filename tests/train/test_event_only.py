@@ -67,3 +67,19 @@ def test_threshold_field_with_drift_trains_and_renders(grey_scene, tmp_path):
     assert tuple(ckpt["threshold"]["field"].shape) == (2, 1, 3, 4)
     assert float(ckpt["threshold"]["field"].abs().sum()) > 0  # the field moved from zero
     assert main(["render", str(tmp_path), "--t", "0.05", "-o", str(tmp_path / "r")]) == 0
+
+
+@pytest.mark.parametrize("which", ["grey", "colour"])
+def test_lowpass_term_of_long_windows_trains_and_is_recorded(grey_scene, colour_scene, tmp_path, which):
+    scene = grey_scene if which == "grey" else colour_scene
+    # windows of at most 30 ms in a 150 ms recording: most pairs of ends of two windows are longer
+    _run(scene, tmp_path, "events.lowpass_weight=1", "events.windows_free=3", "optim.iterations=12",
+         "events.max_window=0.03")
+    rows = [json.loads(line) for line in (tmp_path / "history.jsonl").read_text().splitlines()]
+    vals = [r["event_lowpass"] for r in rows if r.get("event_lowpass") is not None]
+    assert vals and all(v >= 0 for v in vals) and max(vals) > 0  # some step had a long pair
+    off = tmp_path / "off"
+    _run(scene, off, "events.windows_free=3", "optim.iterations=12", "events.max_window=0.03",
+         "events.lowpass_weight=0")
+    rows = [json.loads(line) for line in (off / "history.jsonl").read_text().splitlines()]
+    assert all(r.get("event_lowpass") is None for r in rows)

@@ -1,0 +1,87 @@
+"""The low-pass event term of one step: long windows between the ends of its free windows.
+
+A step renders the two ends of each free window (:func:`fusiongs.train.step.training_step`); any
+two ends of *different* windows also bound a window, usually a long one (a third of the recording
+on average), at no extra render. Its counts are compared after a spatial low-pass
+(:func:`fusiongs.losses.event_lowpass.event_loss_lowpass`), so what they know about large-scale
+levels (a plain wall against the objects in front of it) reaches the model without the per-pixel
+threshold mismatch that makes long windows harmful pixel by pixel (benchmarks/RESULTS.md,
+session 14).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from fusiongs.events.stats import spatial_hot_pixels
+from fusiongs.losses.event import delta_log
+from fusiongs.losses.event_lowpass import event_loss_lowpass
+from fusiongs.train.data import TrainData
+from fusiongs.train.settings import DeblurConfig
+from fusiongs.train.state import FusionState
+
+
+def hot_map(data: TrainData, device: torch.device) -> torch.Tensor:
+    """``[H, W]`` bool hot pixels of the stream (spatial outliers of the event count,
+    :func:`fusiongs.events.stats.spatial_hot_pixels`), computed once and kept in ``data``."""
+    if data.hot is None:
+        h, w = data.camera.height, data.camera.width
+        hot = spatial_hot_pixels(data.events).reshape(h, w)
+        data.hot = torch.from_numpy(np.ascontiguousarray(hot)).to(device)
+    return data.hot
+
+
+def cross_pairs(ends: list[tuple[int, float, int]], min_length: float) -> list[tuple[int, int, float, float]]:
+    """Pairs of window ends from different windows, in time order, at least ``min_length`` s apart.
+
+    Args:
+        ends: ``(render index, t seconds, window)`` of each rendered window end.
+
+    Returns:
+        ``(render index at t_a, render index at t_b, t_a, t_b)`` with ``t_a < t_b``.
+    """
+    out = []
+    for i, (ja, ta, wa) in enumerate(ends):
+        for jb, tb, wb in ends[i + 1:]:
+            if wa == wb or abs(tb - ta) < min_length:
+                continue
+            out.append((ja, jb, ta, tb) if ta < tb else (jb, ja, tb, ta))
+    return out
+
+
+def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: torch.Tensor,
+                 ends: list[tuple[int, float, int]], min_length: float) -> torch.Tensor | None:
+    """Low-pass event loss (:func:`fusiongs.losses.event_lowpass.event_loss_lowpass`) of the
+    :func:`cross_pairs` of the step's window ends, from its whole-sensor linear renders
+    ``lin [T, H, W, 3]`` (grey sensor, or each pixel's own CFA channel: the raw grid, whatever
+    ``events.colour_mode``); None when there is no such pair."""
+    pairs = cross_pairs(ends, min_length)
+    if not pairs:
+        return None
+    ev = cfg.events
+    device = lin.device
+    h, w = data.camera.height, data.camera.width
+    pix = torch.arange(h * w, device=device)
+    a_idx = torch.tensor([a for a, *_ in pairs], device="cpu").to(device, non_blocking=True)
+    b_idx = torch.tensor([b for _, b, *_ in pairs], device="cpu").to(device, non_blocking=True)
+    la, lb = lin[a_idx].reshape(len(pairs), -1, 3), lin[b_idx].reshape(len(pairs), -1, 3)
+    t_mid = 0.5 * (pairs[0][2] + pairs[0][3])  # a drifting θ is taken at the first pair's middle
+    if data.cfa_index is None:
+        d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)[..., 0]  # [B, P]
+        th_p, th_n = state.threshold.theta(pix, t=t_mid)
+        channel, channels = None, 1
+    else:
+        ch = data.cfa_index.reshape(-1)
+        d = delta_log(la, lb, "rgb", eps=ev.log_eps).gather(-1, ch.expand(len(pairs), -1)[..., None])[..., 0]
+        th_p, th_n = state.threshold.theta(pix, t=t_mid, channel=ch)
+        channel, channels = data.cfa_index, 3
+    counts = torch.stack([data.count_maps(ta, tb, device).reshape(2, -1) for _, _, ta, tb in pairs])
+    target = th_p[:, 0] * counts[:, 0] - th_n[:, 0] * counts[:, 1]  # [B, P]
+    valid = (~hot_map(data, device)).expand(len(pairs), h, w)
+    cens = [data.censored_map(ta, tb, ev.censor_radius) for _, _, ta, tb in pairs]
+    if cens[0] is not None:
+        valid = valid & ~torch.stack(cens)
+    scale = 0.5 * (th_p.detach().mean() + th_n.detach().mean())
+    return event_loss_lowpass(d.reshape(-1, h, w), target.reshape(-1, h, w), valid, channel, channels,
+                              ev.lowpass_sigma, scale)
