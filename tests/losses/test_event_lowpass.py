@@ -1,5 +1,6 @@
 """The low-pass event term of long windows: what it sees, what it averages away, what it skips."""
 
+import pytest
 import torch
 
 from fusiongs.losses.event_lowpass import event_loss_lowpass, lowpass_maps
@@ -111,3 +112,15 @@ def test_batched_loss_matches_the_window_by_window_reference_with_gradients():
         gd_s, gt_s = torch.autograd.grad(slow, (d, t))
         assert torch.allclose(gd_f, gd_s, atol=1e-12) and torch.allclose(gt_f, gt_s, atol=1e-12)
         assert float(gd_f.abs().sum()) > 0
+
+
+def test_bad_lowpass_settings_are_one_line_naming_the_key():
+    from fusiongs.errors import ConfigError
+    from fusiongs.train.pipeline import resolve_config
+
+    with pytest.raises(ConfigError, match=r"events.lowpass_sigma: expected a finite number > 0"):
+        resolve_config("event_only", ["events.lowpass_sigma=0"])
+    with pytest.raises(ConfigError, match=r"events.lowpass_weight: expected a finite number >= 0"):
+        resolve_config("event_only", ["events.lowpass_weight=-1"])
+    assert resolve_config("event_only", []).events.lowpass_weight == 1.0
+    assert resolve_config(None, []).events.lowpass_weight == 0.0
