@@ -44,6 +44,16 @@ def test_events_disabled_trains_on_frames_only(colour_scene, tmp_path):
     assert all(math.isfinite(v) for v in tr.history.blur)
 
 
+def test_lowpass_term_is_off_with_frames(colour_scene, tmp_path):
+    """The low-pass term of long windows is for scenes without frames (with frames the blur loss
+    fixes the large scales): asked for on a scene with frames, no step adds it."""
+    cfg = resolve_config(None, BASE + ["events.lowpass_weight=1", "events.windows_free=2",
+                                       "events.max_window=0.01"])
+    tr = train(colour_scene, cfg, tmp_path)
+    assert any(math.isfinite(v) for v in tr.history.event)  # the event windows ran
+    assert all(math.isnan(v) for v in tr.history.event_lowpass)
+
+
 def test_edi_prior_weight_decays_to_zero_at_its_end():
     from fusiongs.train.step import edi_prior_weight
 
