@@ -85,14 +85,16 @@ def select_channel(values: torch.Tensor, channel_index: torch.Tensor) -> torch.T
     """Colour *mask* mode: keep each pixel's own CFA channel.
 
     Args:
-        values: ``[P, 3]`` per-pixel three-channel values (e.g. rendered log change, thresholds).
+        values: ``[..., P, 3]`` per-pixel three-channel values (e.g. rendered log change,
+            thresholds), optionally with leading batch dimensions (several windows).
         channel_index: ``[P]`` int64 CFA channel of each sampled pixel (0 = R, 1 = G, 2 = B), e.g.
             ``cfa_channel_index(pattern, H, W).reshape(-1)[flat_idx]``.
 
     Returns:
-        ``[P, 1]``.
+        ``[..., P, 1]``.
     """
-    return values.gather(-1, channel_index.reshape(-1, 1).to(torch.int64))
+    index = channel_index.reshape(-1, 1).to(torch.int64)
+    return values.gather(-1, index.expand(*values.shape[:-1], 1))
 
 
 def _weighted_mean(per_elem: torch.Tensor, channel_weights: torch.Tensor | None) -> torch.Tensor:

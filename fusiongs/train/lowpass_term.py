@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from fusiongs.events.stats import spatial_hot_pixels
-from fusiongs.losses.event import delta_log
+from fusiongs.losses.event import delta_log, select_channel
 from fusiongs.losses.event_lowpass import event_loss_lowpass
 from fusiongs.train.data import TrainData
 from fusiongs.train.settings import DeblurConfig
@@ -73,7 +73,7 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
         channel, channels = None, 1
     else:
         ch = data.cfa_index.reshape(-1)
-        d = delta_log(la, lb, "rgb", eps=ev.log_eps).gather(-1, ch.expand(len(pairs), -1)[..., None])[..., 0]
+        d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)[..., 0]  # [B, P]
         th_p, th_n = state.threshold.theta(pix, t=t_mid, channel=ch)
         channel, channels = data.cfa_index, 3
     counts = torch.stack([data.count_maps(ta, tb, device).reshape(2, -1) for _, _, ta, tb in pairs])
