@@ -61,9 +61,20 @@ def _channel_masks(valid: torch.Tensor, channel: torch.Tensor | None, channels: 
     return F.one_hot(channel.to(torch.int64), channels).permute(2, 0, 1)[None].to(m.dtype) * m
 
 
+def full_support(channel: torch.Tensor | None, channels: int, sigma: float, height: int, width: int,
+                 device: torch.device, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+    """``[C, H, W]`` Gaussian weight a fully valid neighbourhood of each channel holds around every
+    pixel (the denominator of :func:`lowpass_maps` with every pixel valid; less than 1 near the
+    border and, on a CFA, the channel's share of the pixels)."""
+    full = torch.ones(1, height, width, dtype=torch.bool, device=device)
+    with torch.no_grad():
+        return gaussian_blur(_channel_masks(full, channel, channels)[0].to(dtype), sigma)
+
+
 def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
                        channel: torch.Tensor | None, channels: int, sigma: float,
-                       theta: torch.Tensor | float, min_support: float = 0.2) -> torch.Tensor:
+                       theta: torch.Tensor | float, min_support: float = 0.2,
+                       support: torch.Tensor | None = None) -> torch.Tensor:
     """L1 distance of the low-passed rendered and event log changes of ``B`` long windows.
 
     Per window and channel this is ``|LP(delta_pred) - LP(target)|`` with the low-pass of
@@ -79,6 +90,8 @@ def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: to
             units of the band loss it is added to.
         min_support: places where a channel's valid pixels hold less Gaussian weight than this
             share of a fully valid neighbourhood of that channel are left out.
+        support: :func:`full_support` of these arguments, when the caller keeps it (it depends
+            only on the sensor); computed here when None.
 
     Returns:
         Scalar: the mean over windows of the support-weighted mean over pixels and channels of
@@ -92,10 +105,9 @@ def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: to
     blurred = gaussian_blur(torch.cat([(masks * (delta_pred - target)[:, None]).flatten(0, 1),
                                        masks.flatten(0, 1)]), sigma).reshape(2, b, c, *masks.shape[2:])
     num, den = blurred[0], blurred[1].detach()
-    full = torch.ones_like(valid[:1])
-    with torch.no_grad():
-        den_full = gaussian_blur(_channel_masks(full, channel, channels).to(den.dtype)[0], sigma)
-    w = den * (den >= min_support * den_full)
+    if support is None:
+        support = full_support(channel, channels, sigma, *valid.shape[-2:], valid.device, den.dtype)
+    w = den * (den >= min_support * support.to(den.dtype))
     # no host read of the totals (a GPU would wait): an empty support gives 0 / eps = 0
     per = (w * (num / den.clamp_min(1e-6)).abs()).sum((1, 2, 3)) / w.sum((1, 2, 3)).clamp_min(1e-12)
     return per.mean() / theta

@@ -53,6 +53,7 @@ class TrainData:
     event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
     fast: torch.Tensor | None = None  # [E] bool: a fast event (censored counts), on the device
     hot: torch.Tensor | None = None  # [H, W] bool hot pixels (train/lowpass_term.py), on the device
+    lowpass_support: tuple[float, torch.Tensor] | None = None  # (sigma, [C, H, W]) lowpass_term.py
 
     _coarse: dict = field(default_factory=dict, repr=False)  # factor -> (camera, targets)
 

@@ -16,7 +16,7 @@ import torch
 
 from fusiongs.events.stats import spatial_hot_pixels
 from fusiongs.losses.event import delta_log, select_channel
-from fusiongs.losses.event_lowpass import event_loss_lowpass
+from fusiongs.losses.event_lowpass import event_loss_lowpass, full_support
 from fusiongs.train.data import TrainData
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
@@ -30,6 +30,16 @@ def hot_map(data: TrainData, device: torch.device) -> torch.Tensor:
         hot = spatial_hot_pixels(data.events).reshape(h, w)
         data.hot = torch.from_numpy(np.ascontiguousarray(hot)).to(device)
     return data.hot
+
+
+def support_map(data: TrainData, sigma: float, device: torch.device) -> torch.Tensor:
+    """:func:`fusiongs.losses.event_lowpass.full_support` of the sensor, computed once per
+    ``sigma`` and kept in ``data`` (it depends only on the pixel grid and the CFA)."""
+    if data.lowpass_support is None or data.lowpass_support[0] != sigma:
+        channels = 1 if data.cfa_index is None else 3
+        data.lowpass_support = (sigma, full_support(data.cfa_index, channels, sigma, data.camera.height,
+                                                    data.camera.width, device))
+    return data.lowpass_support[1]
 
 
 def cross_pairs(ends: list[tuple[int, float, int]], min_length: float) -> list[tuple[int, int, float, float]]:
@@ -84,4 +94,4 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
         valid = valid & ~torch.stack(cens)
     scale = 0.5 * (th_p.detach().mean() + th_n.detach().mean())
     return event_loss_lowpass(d.reshape(-1, h, w), target.reshape(-1, h, w), valid, channel, channels,
-                              ev.lowpass_sigma, scale)
+                              ev.lowpass_sigma, scale, support=support_map(data, ev.lowpass_sigma, device))

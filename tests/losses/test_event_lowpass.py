@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from fusiongs.losses.event_lowpass import event_loss_lowpass, lowpass_maps
+from fusiongs.losses.event_lowpass import event_loss_lowpass, full_support, lowpass_maps
 from fusiongs.train.lowpass_term import cross_pairs
 
 H, W = 40, 48
@@ -112,6 +112,20 @@ def test_batched_loss_matches_the_window_by_window_reference_with_gradients():
         gd_s, gt_s = torch.autograd.grad(slow, (d, t))
         assert torch.allclose(gd_f, gd_s, atol=1e-12) and torch.allclose(gt_f, gt_s, atol=1e-12)
         assert float(gd_f.abs().sum()) > 0
+
+
+def test_a_kept_full_support_gives_the_same_loss_and_is_the_blur_of_a_fully_valid_sensor():
+    g = torch.Generator().manual_seed(6)
+    for ch, channels in ((None, 1), (_bayer(), 3)):
+        d = torch.stack([_field(k) for k in range(2)])
+        t = d + 0.2 * torch.randn(2, H, W, generator=g, dtype=torch.float64)
+        valid = torch.rand(2, H, W, generator=g) > 0.3
+        sup = full_support(ch, channels, 2.5, H, W, torch.device("cpu"), torch.float64)
+        _, den = lowpass_maps(torch.zeros(H, W, dtype=torch.float64), torch.ones(H, W, dtype=torch.bool),
+                              ch, channels, 2.5)
+        assert torch.allclose(sup, den, atol=1e-12)
+        assert torch.equal(event_loss_lowpass(d, t, valid, ch, channels, 2.5, 0.2, support=sup),
+                           event_loss_lowpass(d, t, valid, ch, channels, 2.5, 0.2))
 
 
 def test_bad_lowpass_settings_are_one_line_naming_the_key():
