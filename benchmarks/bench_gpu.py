@@ -18,12 +18,12 @@ and backend, the PSNR figures of ``metrics.json`` and the log's last lines.
 
 ``table JSONL [JSONL ...]``: prints those lines as a Markdown table.
 
-``profile [--skip N] [--steps N] SCENE [-- override ...]``: trains SCENE (``fusiongs.train.trainer.
-train``, outputs not written) under ``torch.profiler`` and prints the operators that take the most
-host time and, on CUDA, device time, over ``--steps`` iterations after the first ``--skip`` (the
-profiler steps with each call of the trainer's ``training_step``, so set-up is left out). Where the
-time of a GPU iteration goes (session 20: 22 ms at half resolution, 36 ms at full, for a few ms of
-rasterisation).
+``profile [--skip N] [--steps N] [--config C] SCENE [-- override ...]``: trains SCENE
+(``fusiongs.train.trainer.train``, outputs not written) under ``torch.profiler`` and prints the
+operators that take the most host time and, on CUDA, device time, over ``--steps`` iterations
+after the first ``--skip`` (the profiler steps with each call of the trainer's ``training_step``,
+so set-up is left out). Where the time of a GPU iteration goes (session 20: 22 ms at half
+resolution, 36 ms at full, for a few ms of rasterisation).
 
     PYTHONPATH=. python benchmarks/bench_gpu.py render
     PYTHONPATH=. python benchmarks/bench_gpu.py deblur s1000 SCENE OUT device=cuda
@@ -167,7 +167,8 @@ def table(paths: list[str]) -> None:
               f"{'' if ps is None else f'{ps:.2f}'}{'' if fit is None else f' ({fit:.2f})'} | {r['rc']} |")
 
 
-def profile_training(scene_path: str, overrides: list[str], skip: int, steps: int) -> None:
+def profile_training(scene_path: str, overrides: list[str], skip: int, steps: int,
+                     config: str | None = None) -> None:
     import tempfile
 
     from torch.profiler import ProfilerActivity, profile, schedule
@@ -176,7 +177,7 @@ def profile_training(scene_path: str, overrides: list[str], skip: int, steps: in
     from fusiongs.io import load_scene
     from fusiongs.train.pipeline import resolve_config
 
-    cfg = resolve_config(None, ["output.progress=false", "output.checkpoint_every=0",
+    cfg = resolve_config(config, ["output.progress=false", "output.checkpoint_every=0",
                                 f"optim.iterations={skip + steps + 1}", *overrides])
     cuda = cfg.device.startswith("cuda")
     acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if cuda else [])
@@ -220,6 +221,7 @@ def main(argv=None) -> int:
     pr.add_argument("scene")
     pr.add_argument("--skip", type=int, default=20)
     pr.add_argument("--steps", type=int, default=20)
+    pr.add_argument("--config", default=None, help="a preset or YAML file (default: the deblur one)")
     pr.add_argument("overrides", nargs="*")
     args = ap.parse_args(argv)
     if args.cmd == "deblur" and args.timeout is None and os.environ.get("STEP_TIMEOUT"):
@@ -237,7 +239,7 @@ def main(argv=None) -> int:
         rec = run_deblur(args.name, args.scene, args.out, args.overrides, args.timeout)
         return 0 if rec["rc"] == 0 else 1
     elif args.cmd == "profile":
-        profile_training(args.scene, args.overrides, args.skip, args.steps)
+        profile_training(args.scene, args.overrides, args.skip, args.steps, args.config)
     else:
         table(args.jsonl)
     return 0

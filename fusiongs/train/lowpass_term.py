@@ -15,9 +15,9 @@ import numpy as np
 import torch
 
 from fusiongs.events.stats import spatial_hot_pixels
-from fusiongs.losses.event import delta_log, select_channel
+from fusiongs.losses.event import log_intensity, select_channel
 from fusiongs.losses.event_lowpass import event_loss_lowpass, full_support
-from fusiongs.train.data import TrainData
+from fusiongs.train.data import TrainData, square_dilate
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
 
@@ -28,7 +28,9 @@ def hot_map(data: TrainData, device: torch.device) -> torch.Tensor:
     if data.hot is None:
         h, w = data.camera.height, data.camera.width
         hot = spatial_hot_pixels(data.events).reshape(h, w)
-        data.hot = torch.from_numpy(np.ascontiguousarray(hot)).to(device)
+        # non_blocking: a pageable source is staged by the copy itself, and the host does not wait
+        # for the queue (the first step's only synchronisation otherwise, caught on CUDA)
+        data.hot = torch.from_numpy(np.ascontiguousarray(hot)).to(device, non_blocking=True)
     return data.hot
 
 
@@ -73,25 +75,31 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
     device = lin.device
     h, w = data.camera.height, data.camera.width
     pix = torch.arange(h * w, device=device)
-    a_idx = torch.tensor([a for a, *_ in pairs], device="cpu").to(device, non_blocking=True)
-    b_idx = torch.tensor([b for _, b, *_ in pairs], device="cpu").to(device, non_blocking=True)
-    la, lb = lin[a_idx].reshape(len(pairs), -1, 3), lin[b_idx].reshape(len(pairs), -1, 3)
+    times = sorted({t for _, t, _ in ends})
+    rank = {t: k for k, t in enumerate(times)}
+    # one small host-to-device copy: each pair's renders and count rows
+    rows = torch.tensor([[a for a, *_ in pairs], [b for _, b, *_ in pairs],
+                         [rank[ta] for *_, ta, _ in pairs], [rank[tb] for *_, tb in pairs]],
+                        device="cpu").to(device, non_blocking=True)
+    flat = lin.reshape(lin.shape[0], -1, 3)  # [T, P, 3]
     t_mid = 0.5 * (pairs[0][2] + pairs[0][3])  # a drifting θ is taken at the first pair's middle
-    if data.cfa_index is None:
-        d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)[..., 0]  # [B, P]
+    if data.cfa_index is None:  # each render's log once; a pair's change is a difference of two
+        logs = log_intensity(flat, "grey", ev.grey_weights, ev.log_eps)[..., 0]  # [T, P]
         th_p, th_n = state.threshold.theta(pix, t=t_mid)
         channel, channels = None, 1
     else:
         ch = data.cfa_index.reshape(-1)
-        d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)[..., 0]  # [B, P]
+        logs = select_channel(log_intensity(flat, "rgb", eps=ev.log_eps), ch)[..., 0]  # [T, P]
         th_p, th_n = state.threshold.theta(pix, t=t_mid, channel=ch)
         channel, channels = data.cfa_index, 3
-    counts = torch.stack([data.count_maps(ta, tb, device).reshape(2, -1) for _, _, ta, tb in pairs])
+    d = logs[rows[1]] - logs[rows[0]]  # [B, P]: delta_log of each pair
+    cum, cum_fast = data.cumulative_counts(times, device)  # [K, 2, P], [K, P] | None
+    counts = cum[rows[3]] - cum[rows[2]]  # [B, 2, P]: count_maps of each pair
     target = th_p[:, 0] * counts[:, 0] - th_n[:, 0] * counts[:, 1]  # [B, P]
     valid = (~hot_map(data, device)).expand(len(pairs), h, w)
-    cens = [data.censored_map(ta, tb, ev.censor_radius) for _, _, ta, tb in pairs]
-    if cens[0] is not None:
-        valid = valid & ~torch.stack(cens)
+    if cum_fast is not None:  # censored_map of each pair
+        fast = (cum_fast[rows[3]] - cum_fast[rows[2]]).reshape(-1, h, w)
+        valid = valid & ~(square_dilate(fast, ev.censor_radius) > 0)
     scale = 0.5 * (th_p.detach().mean() + th_n.detach().mean())
     return event_loss_lowpass(d.reshape(-1, h, w), target.reshape(-1, h, w), valid, channel, channels,
                               ev.lowpass_sigma, scale, support=support_map(data, ev.lowpass_sigma, device))

@@ -138,3 +138,21 @@ def test_bad_lowpass_settings_are_one_line_naming_the_key():
         resolve_config("event_only", ["events.lowpass_weight=-1"])
     assert resolve_config("event_only", []).events.lowpass_weight == 1.0
     assert resolve_config(None, []).events.lowpass_weight == 0.0
+
+
+@pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
+@pytest.mark.parametrize("sigma", [1.0, 2.5, 4.0])
+def test_blur_with_a_kept_kernel_is_kornias_gaussian_blur(dtype, sigma):
+    import kornia
+
+    from fusiongs.losses.event_lowpass import gaussian_blur
+
+    maps = torch.rand(4, H, W, generator=torch.Generator().manual_seed(9), dtype=dtype).requires_grad_(True)
+    k = 2 * max(1, int(torch.tensor(3.0 * sigma).ceil())) + 1
+    ref = kornia.filters.gaussian_blur2d(maps[None], (k, k), (sigma, sigma), border_type="constant")[0]
+    got = gaussian_blur(maps, sigma)
+    assert torch.allclose(got, ref, rtol=0, atol=1e-12 if dtype == torch.float64 else 1e-6)
+    w = torch.rand(4, H, W, generator=torch.Generator().manual_seed(10), dtype=dtype)
+    (g_got,) = torch.autograd.grad((got * w).sum(), maps)
+    (g_ref,) = torch.autograd.grad((ref * w).sum(), maps)
+    assert torch.allclose(g_got, g_ref, rtol=0, atol=1e-12 if dtype == torch.float64 else 1e-6)
