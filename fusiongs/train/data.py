@@ -31,7 +31,8 @@ class TrainData:
         t_range: ``(t0, t1)`` seconds where both events (if any) and the trajectory are defined.
         frame_interval: median spacing of frame mid-times (s), or the range when < 2 frames.
         event_index: ``[E]`` int32 flat index ``p * H * W + y * W + x`` of every event (p = 0 ON,
-            1 OFF) on the training device, for :meth:`count_maps`; None without events.
+            1 OFF) on the training device, for :meth:`count_maps` and :meth:`cumulative_counts`;
+            None without events.
 
     Host and device: ``exposures``, ``hpf_times`` and ``pvc_times`` stay on the host (the step's
     times are drawn there and moved to the device explicitly); images and maps live on the device.
