@@ -24,6 +24,7 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from types import SimpleNamespace
 
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch (numba's spinning threads)
 
@@ -71,8 +72,7 @@ def main(argv=None) -> int:
         ap.error(f"{args.scene}: the low-pass term is for scenes without frames")
     data.fast = fast_events(data.events, cfg.events.censor * dead_time_us(data.events), device)
     channels = 1 if data.cfa_index is None else 3
-    state = type("S", (), {})()
-    state.threshold = ContrastThreshold(channels=channels, init=(0.2, 0.25)).to(device)
+    state = SimpleNamespace(threshold=ContrastThreshold(channels=channels, init=(0.2, 0.25)).to(device))
     h, w = data.camera.height, data.camera.width
     gen = torch.Generator().manual_seed(0)
     longest = longest_free_window(cfg, data)

@@ -113,31 +113,23 @@ class TrainData:
             of either polarity among them (None when none were marked); row 0 is zero. Row ``b``
             minus row ``a`` is :meth:`count_maps` ``(times[a], times[b])`` exactly (integer sums
             in float32), and the fast row difference is :meth:`censored_map`'s sum before its
-            threshold. The events of ``[times[0], times[-1])`` are added once, segment by segment,
-            where a window at a time adds up each long window's events again.
+            threshold. The events of ``[times[0], times[-1])`` are added once, segment by segment
+            (:meth:`_window_sum`), where a window at a time adds up each long window's events
+            again.
         """
         if self.events is None:
             raise RuntimeError("cumulative_counts needs events (TrainData.events is None)")
-        if self.event_index is None:
-            self.event_index = event_indices(self.events, device)
         h, w = self.events.height, self.events.width
-        hw, k = h * w, len(times)
-        us = [int(round(t * 1e6)) for t in times]
-        bounds = [self.events.index_range(us[0], u)[1] for u in us]  # segment j: [bounds[j], bounds[j+1])
-        i0, i1 = bounds[0], bounds[-1]
-        idx = self.event_index[i0:i1]
-        ones = torch.ones(i1 - i0, dtype=torch.float32, device=idx.device)
-        weights = [ones] if self.fast is None else [ones, self.fast[i0:i1].to(torch.float32)]
-        # row 0 stays zero; one 1-D index_add per segment and map (a 2-column source is ~60x
-        # slower on the CPU)
-        out = torch.zeros(len(weights), k, 2 * hw, dtype=torch.float32, device=idx.device)
-        for j in range(k - 1):  # each segment's events once, into its own row
-            a, b = bounds[j] - i0, bounds[j + 1] - i0
-            for m, wt in enumerate(weights):
-                out[m, j + 1].index_add_(0, idx[a:b], wt[a:b])
-        cum = out.cumsum(1)
-        counts = cum[0].reshape(k, 2, hw).to(device)
-        fast = None if self.fast is None else (cum[1, :, :hw] + cum[1, :, hw:]).to(device)
+        segments = list(zip(times[:-1], times[1:]))  # each segment's events once, into its own row
+        maps = [[self._window_sum(a, b, device) for a, b in segments]]
+        if self.fast is not None:
+            maps.append([self._window_sum(a, b, device, self.fast) for a, b in segments])
+        rows = []
+        for segs in maps:  # row 0 is zero: nothing between times[0] and itself
+            zero = torch.zeros(1, 2 * h * w, dtype=torch.float32, device=device)
+            rows.append(torch.cat([zero, *(seg[None].to(device) for seg in segs)]).cumsum(0))
+        counts = rows[0].reshape(len(times), 2, h * w)
+        fast = None if self.fast is None else rows[1][:, :h * w] + rows[1][:, h * w:]
         return counts, fast
 
     def censored_map(self, t_a: float, t_b: float, radius: int = 0) -> torch.Tensor | None:
