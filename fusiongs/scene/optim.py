@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass
 import torch
 from torch import nn
 
-from fusiongs.scene.gaussians import PARAM_NAMES, GaussianModel
+from fusiongs.scene.gaussians import PARAM_NAMES, SH_C0, GaussianModel
 
 Optimizers = torch.optim.Optimizer | Iterable[torch.optim.Optimizer] | Mapping[str, torch.optim.Optimizer]
 
@@ -105,3 +105,28 @@ def reset_opacity(model: GaussianModel, optimizers: Optimizers | None, value: fl
     limit = math.log(value / (1.0 - value))  # logit(value)
     replace_parameters(model, optimizers, lambda _, x: x.clamp_max(limit),
                        lambda _, v: torch.zeros_like(v), names=("opacity_logits",))
+
+
+def relative_colour_step(model: GaussianModel, step: Callable[[], None], floor: float) -> None:
+    """Run ``step`` (an optimiser step that moves the colours) with each colour's step scaled by
+    its own level: the change of ``sh0`` (and of ``shN``) is multiplied by
+    ``max(c, floor) / 0.5``, ``c = sh0 * C0 + 0.5`` the Gaussian's linear base colour per channel.
+
+    An Adam step is a roughly fixed change of its parameter. On the linear colour that changes
+    log intensity, where the event loss acts, by ``lr / c``: large for a dark Gaussian, small for a
+    bright one, so a scene that spans several log units (a dim room with lit objects) is fitted
+    slowly at the bright end and noisily at the dark end. Scaled by ``c / 0.5`` the step changes
+    ``log c`` by about ``lr / 0.5`` at every level (Adam on ``log c``, to first order), and by the
+    same as before at the grey start. Below ``floor`` (linear, > 0) the step stops shrinking: a
+    colour at or below zero stays movable, and ``floor = 0.5`` keeps the linear step below the
+    grey start (fast toward black) while steps above it grow with the colour. Runs without
+    gradients; every tensor stays on the model's device.
+    """
+    with torch.no_grad():
+        scale = (model.sh0.detach() * SH_C0 + 0.5).clamp_min(floor) / 0.5  # [N, 1, 3]
+        old0, oldN = model.sh0.detach().clone(), model.shN.detach().clone()
+    step()
+    with torch.no_grad():
+        model.sh0.copy_(old0 + (model.sh0 - old0) * scale)
+        if model.shN.numel():
+            model.shN.copy_(oldN + (model.shN - oldN) * scale)

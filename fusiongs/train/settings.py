@@ -167,6 +167,10 @@ class OptimSettings:
     lr_quats: float = 1e-3
     lr_opacities: float = 5e-2
     lr_colors: float = 2.5e-3
+    colour_step: Literal["linear", "relative"] = "linear"  # relative: each colour's Adam step is
+                                     # scaled by max(level, colour_step_floor) / 0.5
+    colour_step_floor: float = 1e-3  # linear level below which the relative step stops shrinking
+    colour_step_start: int = 0       # iteration from which the relative step applies
     lr_gain: float = 1e-3
     refine_poses: bool = True        # refine the trajectory knots jointly
     lr_pose: float = 1e-3            # camera learning rate, decayed to lr_pose_final
@@ -176,7 +180,8 @@ class OptimSettings:
     def __post_init__(self) -> None:
         _need_positive("optim", self, ("lr_means", "lr_means_final", "lr_scales", "lr_quats",
                                        "lr_opacities", "lr_colors", "lr_gain", "lr_pose",
-                                       "lr_pose_final"))
+                                       "lr_pose_final", "colour_step_floor"))
+        _need_positive("optim", self, ("colour_step_start",), zero_ok=True)
 
 
 @dataclass

@@ -29,7 +29,7 @@ from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
 from fusiongs.scene.gaussians import GaussianModel
-from fusiongs.scene.optim import GaussianLR, make_optimizer
+from fusiongs.scene.optim import GaussianLR, make_optimizer, relative_colour_step
 from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint, save_checkpoint
 from fusiongs.train.config import to_dict
 from fusiongs.train.data import (
@@ -212,7 +212,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg)
     fill = frame_colour(scene, data, cfg)
-    colour_scale = colour_lr_scale(fill)
+    # the relative colour step scales each colour's step by its own level, the fill's included
+    colour_scale = colour_lr_scale(fill) if cfg.optim.colour_step == "linear" else 1.0
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg, fill), fill)
     extent = scene_extent(scene.poses.c2w, state.depth_far)
@@ -273,7 +274,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             loss.backward()
             history.backward_seconds += time.perf_counter() - t_back
             history.render_seconds += res.render_seconds
-            _optimise(opts, cfg, it)
+            _optimise(opts, cfg, it, state)
             if cfg.densify.enabled:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
@@ -446,10 +447,14 @@ def _regularisers(state: FusionState, cfg: DeblurConfig, n_frames: int) -> torch
     return total
 
 
-def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int) -> None:
+def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int,
+              state: FusionState) -> None:
     for name, opt in opts.items():
         if name == "pose" and it < cfg.optim.pose_start:
             opt.zero_grad(set_to_none=True)
             continue
-        opt.step()
+        if name == "gaussians" and cfg.optim.colour_step == "relative" and it >= cfg.optim.colour_step_start:
+            relative_colour_step(state.model, opt.step, cfg.optim.colour_step_floor)
+        else:
+            opt.step()
         opt.zero_grad(set_to_none=True)
