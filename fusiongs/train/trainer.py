@@ -213,6 +213,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     trajectory = build_trajectory(scene, cfg)
     fill = frame_colour(scene, data, cfg)
     # the relative colour step scales each colour's step by its own level, the fill's included
+    # (before optim.colour_step_start, the linear step is then not scaled by the fill's level)
     colour_scale = colour_lr_scale(fill) if cfg.optim.colour_step == "linear" else 1.0
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg, fill), fill)
