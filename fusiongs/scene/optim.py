@@ -107,23 +107,26 @@ def reset_opacity(model: GaussianModel, optimizers: Optimizers | None, value: fl
                        lambda _, v: torch.zeros_like(v), names=("opacity_logits",))
 
 
-def relative_colour_step(model: GaussianModel, step: Callable[[], None], floor: float) -> None:
+def relative_colour_step(model: GaussianModel, step: Callable[[], None], floor: float,
+                         reference: float = 0.5) -> None:
     """Run ``step`` (an optimiser step that moves the colours) with each colour's step scaled by
     its own level: the change of ``sh0`` (and of ``shN``) is multiplied by
-    ``max(c, floor) / 0.5``, ``c = sh0 * C0 + 0.5`` the Gaussian's linear base colour per channel.
+    ``max(c, floor) / reference``, ``c = sh0 * C0 + 0.5`` the Gaussian's linear base colour per
+    channel, ``reference`` the level whose step is left as ``step`` made it (the grey start, or
+    the frame's fill level whose colour rates are already scaled to it).
 
     An Adam step is a roughly fixed change of its parameter. On the linear colour that changes
     log intensity, where the event loss acts, by ``lr / c``: large for a dark Gaussian, small for a
     bright one, so a scene that spans several log units (a dim room with lit objects) is fitted
     slowly at the bright end and noisily at the dark end. Scaled by ``c / 0.5`` the step changes
     ``log c`` by about ``lr / 0.5`` at every level (Adam on ``log c``, to first order), and by the
-    same as before at the grey start. Below ``floor`` (linear, > 0) the step stops shrinking: a
+    same as before at the reference level. Below ``floor`` (linear, > 0) the step stops shrinking: a
     colour at or below zero stays movable, and ``floor = 0.5`` keeps the linear step below the
     grey start (fast toward black) while steps above it grow with the colour. Runs without
     gradients; every tensor stays on the model's device.
     """
     with torch.no_grad():
-        scale = (model.sh0.detach() * SH_C0 + 0.5).clamp_min(floor) / 0.5  # [N, 1, 3]
+        scale = (model.sh0.detach() * SH_C0 + 0.5).clamp_min(floor) / reference  # [N, 1, 3]
         old0, oldN = model.sh0.detach().clone(), model.shN.detach().clone()
     step()
     with torch.no_grad():

@@ -168,7 +168,7 @@ class OptimSettings:
     lr_opacities: float = 5e-2
     lr_colors: float = 2.5e-3
     colour_step: Literal["linear", "relative"] = "linear"  # relative: each colour's Adam step is
-                                     # scaled by max(level, colour_step_floor) / 0.5
+                                     # scaled by max(level, colour_step_floor) / its start level
     colour_step_floor: float = 1e-3  # linear level below which the relative step stops shrinking
     colour_step_start: int = 0       # iteration from which the relative step applies
     lr_gain: float = 1e-3

@@ -212,9 +212,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg)
     fill = frame_colour(scene, data, cfg)
-    # the relative colour step scales each colour's step by its own level, the fill's included
-    # (before optim.colour_step_start, the linear step is then not scaled by the fill's level)
-    colour_scale = colour_lr_scale(fill) if cfg.optim.colour_step == "linear" else 1.0
+    colour_scale = colour_lr_scale(fill)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg, fill), fill)
     extent = scene_extent(scene.poses.c2w, state.depth_far)
@@ -275,7 +273,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             loss.backward()
             history.backward_seconds += time.perf_counter() - t_back
             history.render_seconds += res.render_seconds
-            _optimise(opts, cfg, it, state)
+            _optimise(opts, cfg, it, state, colour_scale)
             if cfg.densify.enabled:
                 strategy.step_post_backward(state.model, opts["gaussians"], res.meta, it)
             tr.iteration = it + 1
@@ -449,13 +447,17 @@ def _regularisers(state: FusionState, cfg: DeblurConfig, n_frames: int) -> torch
 
 
 def _optimise(opts: dict[str, torch.optim.Optimizer], cfg: DeblurConfig, it: int,
-              state: FusionState) -> None:
+              state: FusionState, colour_scale: float = 1.0) -> None:
+    """One step of every optimiser. With ``optim.colour_step: relative`` (from
+    ``colour_step_start``) each colour's step is scaled by its level over the start level
+    ``0.5 * colour_scale`` (grey, or the frame's fill, for which :func:`colour_lr_scale` has
+    already scaled the colour rates)."""
     for name, opt in opts.items():
         if name == "pose" and it < cfg.optim.pose_start:
             opt.zero_grad(set_to_none=True)
             continue
         if name == "gaussians" and cfg.optim.colour_step == "relative" and it >= cfg.optim.colour_step_start:
-            relative_colour_step(state.model, opt.step, cfg.optim.colour_step_floor)
+            relative_colour_step(state.model, opt.step, cfg.optim.colour_step_floor, 0.5 * colour_scale)
         else:
             opt.step()
         opt.zero_grad(set_to_none=True)

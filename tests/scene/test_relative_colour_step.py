@@ -112,3 +112,22 @@ def test_trainer_applies_the_relative_step_to_the_gaussians_only_when_configured
         _optimise(opts, cfg, it, SimpleNamespace(model=m))
         torch.testing.assert_close(m.sh0 - before, expected)
         assert m.sh0.grad is None
+
+
+def test_relative_step_is_the_configured_one_at_the_reference_level():
+    # a start from a frame's fill: the colour rates are already scaled to the fill's level, so the
+    # relative step leaves that level's change as the optimiser made it
+    from types import SimpleNamespace
+
+    from fusiongs.train.config import load_config
+    from fusiongs.train.settings import DeblurConfig
+    from fusiongs.train.trainer import _optimise
+
+    levels = torch.tensor([[0.1, 0.2, 0.8]])
+    m = _model(levels, sh_degree=0)
+    opts = {"gaussians": torch.optim.SGD([m.sh0], lr=1.0)}
+    m.sh0.grad = -torch.ones_like(m.sh0)
+    before = m.sh0.detach().clone()
+    cfg = load_config(DeblurConfig, None, ["optim.colour_step=relative"])
+    _optimise(opts, cfg, 0, SimpleNamespace(model=m), colour_scale=0.4)  # fill level 0.2
+    torch.testing.assert_close(m.sh0 - before, levels[:, None, :] / 0.2)
