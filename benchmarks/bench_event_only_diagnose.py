@@ -11,10 +11,16 @@ limit; if it is not, the event model is not the (only) limit.
 Also reported: the *HPF floor*, the affine-fit PSNR of the leaky-integrator (high-pass filter)
 intensity image that anchors event-only training, at the held-out instants.
 
+``--true-geometry`` starts the Gaussians on the simulator's true surfaces instead of the events'
+stereo points (grey, as the stereo's colours would be replaced; the random share stays): what the
+first geometry is worth. ``--stereo-accuracy`` prints how close the stereo points of the events'
+HPF images lie to those surfaces and exits.
+
 Scenes are tuning seeds of the sweep (``fusiongs simulate --sweep-seed N --split tuning``) without
 frames; the hook is installed only in this process (no production code path changes).
 
-    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE OUT [--oracle] [overrides ...]
+    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE OUT [--oracle] [--true-geometry] [K=V]
+    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE --stereo-accuracy
     PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE --floor
 """
 
@@ -114,6 +120,55 @@ def install_max_window(seconds: float) -> None:
     step.sample_free_windows = capped
 
 
+def true_surface_points(scene: Path, c2w: torch.Tensor) -> torch.Tensor:
+    """``[M, 3]`` points of the simulator's surfaces seen through every pixel centre of the views
+    posed by ``c2w`` ``[N, 4, 4]`` (float32, CPU)."""
+    from fusiongs.sim.simulate import scene_renderer
+
+    caster = scene_renderer(sim_config(scene)).caster
+    return torch.cat([caster.surface_points(c.float()).cpu() for c in torch.as_tensor(c2w)]).float()
+
+
+def install_true_geometry(scene: Path) -> None:
+    """Make the stereo initialisation return the true surface points of its views (grey 0.5,
+    confidence 1): the trainer keeps ``init.stereo_share`` of them and adds its random points."""
+    import fusiongs.camera.stereo as stereo
+
+    def true_points(images, c2w, camera, near, far, **_):
+        xyz = true_surface_points(scene, c2w)
+        return xyz, torch.full((xyz.shape[0], images.shape[-1]), 0.5), torch.ones(xyz.shape[0])
+
+    stereo.stereo_points = true_points
+
+
+def stereo_accuracy(scene_path: Path, config: str = "event_only", n_truth: int = 30000) -> dict:
+    """How close the event-only stereo points (:func:`fusiongs.train.trainer.init_images` at the
+    trainer's :data:`EVENT_ONLY_VIEWS` instants, the config's depth range and confidence) lie to
+    the true surfaces: the distance to the nearest of ``n_truth`` true surface points over the
+    point's distance from the path's mean camera centre, as shares below 5 % and 20 % and the median."""
+    from fusiongs.camera.stereo import stereo_points
+    from fusiongs.io.scene_io import load_scene
+    from fusiongs.train.data import prepare_data
+    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.train.state import EVENT_ONLY_VIEWS
+    from fusiongs.train.trainer import build_trajectory, init_images
+
+    scene, cfg = load_scene(scene_path), resolve_config(config, [])
+    data = prepare_data(scene, torch.device("cpu"), True)
+    images = init_images(scene, data, cfg)
+    with torch.no_grad():
+        instants = torch.linspace(data.t_range[0], data.t_range[1], EVENT_ONLY_VIEWS, dtype=torch.float64)
+        c2w = build_trajectory(scene, cfg).c2w(instants).float()
+    xyz, _, _ = stereo_points(images, c2w, data.camera, cfg.init.depth_min, cfg.init.depth_max,
+                              n_planes=cfg.init.stereo_planes, min_confidence=cfg.init.stereo_min_confidence)
+    truth = true_surface_points(scene_path, c2w)
+    truth = truth[torch.randperm(truth.shape[0], generator=torch.Generator().manual_seed(0))[:n_truth]]
+    dist = torch.cat([torch.cdist(x, truth).min(dim=1).values for x in xyz.split(2000)])
+    rel = (dist / (xyz - c2w[:, :3, 3].mean(dim=0)).norm(dim=1)).numpy()
+    return {"points": int(xyz.shape[0]), "within_5pct": float(np.mean(rel < 0.05)),
+            "within_20pct": float(np.mean(rel < 0.2)), "median_rel": float(np.median(rel))}
+
+
 def hpf_floor(scene_path: Path, theta0: float = 0.22, tau: float = 0.05) -> dict[str, float]:
     """Affine-fit PSNR / SSIM of the HPF intensity image (the event-only anchor) at the held-out
     instants (:func:`fusiongs.eval.event_floor.leaky_integrator_floor`)."""
@@ -142,6 +197,9 @@ def main(argv=None) -> int:
     p.add_argument("--oracle", action="store_true", help="true log changes as event targets")
     p.add_argument("--max-window", type=float, default=None, help="cap on free windows (s)")
     p.add_argument("--floor", action="store_true", help="print the HPF floor and exit")
+    p.add_argument("--true-geometry", action="store_true", help="first Gaussians on the true surfaces")
+    p.add_argument("--stereo-accuracy", action="store_true",
+                   help="print how close the events' stereo points lie to the true surfaces and exit")
     p.add_argument("--config", default="event_only")
     p.add_argument("overrides", nargs="*")
     args = p.parse_intermixed_args(argv)
@@ -149,12 +207,17 @@ def main(argv=None) -> int:
     if args.floor:
         print(json.dumps(hpf_floor(args.scene)))
         return 0
+    if args.stereo_accuracy:
+        print(json.dumps(stereo_accuracy(args.scene, args.config)))
+        return 0
     from fusiongs.train.pipeline import run_deblur
 
     if args.oracle:
         install_oracle(TrueLog(*true_logs(args.scene)))
     if args.max_window is not None:
         install_max_window(args.max_window)
+    if args.true_geometry:
+        install_true_geometry(args.scene)
     overrides = ["output.progress=false", *args.overrides, *(["events.loss=mse"] if args.oracle else [])]
     run_deblur(args.scene, args.out, config=args.config, overrides=overrides, log=lambda *_: None)
     s = summarise(args.out)
