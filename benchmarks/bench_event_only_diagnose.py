@@ -204,6 +204,12 @@ def main(argv=None) -> int:
     p.add_argument("overrides", nargs="*")
     args = p.parse_intermixed_args(argv)
     torch.set_num_threads(1)
+    facts = args.scene / "gt" / "sim.json"
+    if (args.oracle or args.true_geometry or args.stereo_accuracy) and not facts.is_file():
+        p.error(f"{facts}: not found; --oracle, --true-geometry and "
+                "--stereo-accuracy need a scene written by fusiongs simulate")
+    if args.out is None and not (args.floor or args.stereo_accuracy):
+        p.error("OUT: expected an output folder for the training run")
     if args.floor:
         print(json.dumps(hpf_floor(args.scene)))
         return 0
