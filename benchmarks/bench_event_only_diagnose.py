@@ -11,15 +11,20 @@ limit; if it is not, the event model is not the (only) limit.
 Also reported: the *HPF floor*, the affine-fit PSNR of the leaky-integrator (high-pass filter)
 intensity image that anchors event-only training, at the held-out instants.
 
-``--true-geometry`` starts the Gaussians on the simulator's true surfaces instead of the events'
-stereo points (grey, as the stereo's colours would be replaced; the random share stays): what the
-first geometry is worth. ``--stereo-accuracy`` prints how close the stereo points of the events'
-HPF images lie to those surfaces and exits.
+``--true-theta`` gives every pixel its true ON and OFF threshold (fixed): what the per-pixel
+threshold mismatch costs, e.g. of long windows. ``--true-geometry`` starts the Gaussians on the
+simulator's true surfaces instead of the events' stereo points (grey, as the stereo's colours
+would be replaced; the random share stays): what the first geometry is worth.
+``--stereo-accuracy`` prints how close the stereo points of the events' HPF images lie to those
+surfaces and exits. ``--sensor refractory_s=0,...`` first writes the scene again with those
+sensor-model fields changed (same seed, scene, path and thresholds) and trains on that: what each
+part of the sensor model costs.
 
 Scenes are tuning seeds of the sweep (``fusiongs simulate --sweep-seed N --split tuning``) without
 frames; the hook is installed only in this process (no production code path changes).
 
-    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE OUT [--oracle] [--true-geometry] [K=V]
+    PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE OUT [--oracle] [--true-geometry]
+        [--true-theta] [--sensor FIELD=V,...] [K=V]
     PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE --stereo-accuracy
     PYTHONPATH=. python benchmarks/bench_event_only_diagnose.py SCENE --floor
 """
@@ -141,6 +146,64 @@ def install_true_geometry(scene: Path) -> None:
     stereo.stereo_points = true_points
 
 
+def true_thresholds(scene: Path) -> tuple[torch.Tensor, torch.Tensor]:
+    """``([H*W], [H*W])`` float32 ON and OFF thresholds of each pixel as the simulator drew them
+    (:func:`fusiongs.sim.dvs.pixel_thresholds` from the seed's threshold stream, times the scale
+    it tuned; a leak's drift is left out)."""
+    from fusiongs.sim import dvs
+
+    cfg = sim_config(scene)
+    facts = json.loads((scene / "gt" / "sim.json").read_text())
+    rng = np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(7)[1])
+    on, off = dvs.pixel_thresholds(cfg.dvs, cfg.width * cfg.height, rng, width=cfg.width)
+    scale = float(facts["threshold_scale"])
+    return torch.as_tensor(on * scale, dtype=torch.float32), torch.as_tensor(off * scale, dtype=torch.float32)
+
+
+def resimulate(scene: Path, out: Path, sensor: str) -> Path:
+    """Write ``scene`` again to ``out`` with some ``DVSParams`` fields changed (``sensor``:
+    ``name=value,...``, e.g. ``refractory_s=0,ba_rate_hz=0``): the same seed, scene, camera path
+    and thresholds, another sensor model. Returns ``out``."""
+    import dataclasses
+
+    from fusiongs.sim.simulate import run_simulation
+    from fusiongs.sim.write import write_simulated_scene
+
+    cfg = sim_config(scene)
+    fields = {f.name for f in dataclasses.fields(cfg.dvs)}
+    changes = {}
+    for item in sensor.split(","):
+        name, _, value = item.partition("=")
+        if name not in fields:
+            raise ValueError(f"--sensor: {name!r} is not a DVSParams field ({', '.join(sorted(fields))})")
+        try:
+            changes[name] = float(value)
+        except ValueError:
+            raise ValueError(f"--sensor: {name}: expected a number, got {value!r}") from None
+    cfg = dataclasses.replace(cfg, dvs=dataclasses.replace(cfg.dvs, **changes))
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, out, overwrite=True)
+    print(json.dumps({"resimulated": str(out), "events": len(res.scene.events), **changes}))
+    return out
+
+
+def install_true_theta(scene: Path) -> None:
+    """Make every threshold the training reads the pixel's true one (θ is then fixed: the learnt
+    parameters are no longer read)."""
+    from fusiongs.losses.threshold import ContrastThreshold
+
+    on, off = true_thresholds(scene)
+    mean = (on.mean().reshape(1), off.mean().reshape(1))
+
+    def theta(self, pixels=None, t=None, channel=None):
+        if pixels is None:
+            return mean[0].expand(self.channels), mean[1].expand(self.channels)
+        idx = pixels.reshape(-1).cpu()
+        return on[idx][:, None].to(pixels.device), off[idx][:, None].to(pixels.device)
+
+    ContrastThreshold.theta = theta
+
+
 def stereo_accuracy(scene_path: Path, config: str = "event_only", n_truth: int = 30000) -> dict:
     """How close the event-only stereo points (:func:`fusiongs.train.trainer.init_images` at the
     trainer's :data:`EVENT_ONLY_VIEWS` instants, the config's depth range and confidence) lie to
@@ -198,6 +261,10 @@ def main(argv=None) -> int:
     p.add_argument("--max-window", type=float, default=None, help="cap on free windows (s)")
     p.add_argument("--floor", action="store_true", help="print the HPF floor and exit")
     p.add_argument("--true-geometry", action="store_true", help="first Gaussians on the true surfaces")
+    p.add_argument("--true-theta", action="store_true", help="every pixel's true threshold, fixed")
+    p.add_argument("--sensor", default=None,
+                   help="first re-simulate the scene into OUT_scene with these DVSParams fields "
+                        "changed, e.g. refractory_s=0,ba_rate_hz=0,hot_pixel_fraction=0,leak_rate_hz=0")
     p.add_argument("--stereo-accuracy", action="store_true",
                    help="print how close the events' stereo points lie to the true surfaces and exit")
     p.add_argument("--config", default="event_only")
@@ -205,8 +272,9 @@ def main(argv=None) -> int:
     args = p.parse_intermixed_args(argv)
     torch.set_num_threads(1)
     facts = args.scene / "gt" / "sim.json"
-    if (args.oracle or args.true_geometry or args.stereo_accuracy) and not facts.is_file():
-        p.error(f"{facts}: not found; --oracle, --true-geometry and "
+    needs_facts = args.oracle or args.true_geometry or args.true_theta or args.stereo_accuracy or args.sensor
+    if needs_facts and not facts.is_file():
+        p.error(f"{facts}: not found; --oracle, --true-geometry, --true-theta, --sensor and "
                 "--stereo-accuracy need a scene written by fusiongs simulate")
     if args.out is None and not (args.floor or args.stereo_accuracy):
         p.error("OUT: expected an output folder for the training run")
@@ -218,12 +286,21 @@ def main(argv=None) -> int:
         return 0
     from fusiongs.train.pipeline import run_deblur
 
+    if args.sensor:
+        if args.oracle or args.true_geometry or args.true_theta:
+            p.error("--sensor: the re-simulated scene has no gt/sim.json; use it without the truth options")
+        try:
+            args.scene = resimulate(args.scene, args.out.parent / f"{args.out.name}_scene", args.sensor)
+        except ValueError as err:
+            p.error(str(err))
     if args.oracle:
         install_oracle(TrueLog(*true_logs(args.scene)))
     if args.max_window is not None:
         install_max_window(args.max_window)
     if args.true_geometry:
         install_true_geometry(args.scene)
+    if args.true_theta:
+        install_true_theta(args.scene)
     overrides = ["output.progress=false", *args.overrides, *(["events.loss=mse"] if args.oracle else [])]
     run_deblur(args.scene, args.out, config=args.config, overrides=overrides, log=lambda *_: None)
     s = summarise(args.out)

@@ -15,6 +15,7 @@ import torch
 
 from fusiongs.errors import InputError
 from fusiongs.losses.blur import apply_response
+from fusiongs.losses.event_lowpass import gaussian_blur
 
 
 def _check_pair(where: str, a: torch.Tensor, b: torch.Tensor) -> None:
@@ -53,7 +54,7 @@ def edi_prior_loss(
 
 
 def intensity_prior_loss(
-    render: torch.Tensor, hpf_log_image: torch.Tensor, eps: float = 1e-3
+    render: torch.Tensor, hpf_log_image: torch.Tensor, eps: float = 1e-3, highpass: float = 0.0
 ) -> torch.Tensor:
     """Event-3DGS intensity loss ``l_i``: L1 in log space up to a fitted per-channel offset.
 
@@ -61,10 +62,18 @@ def intensity_prior_loss(
     per-channel median of ``J - log(L + eps)``, the offset minimising the L1 (held without
     gradient: at the minimum the loss is flat in ``b_c``).
 
+    With ``highpass = s > 0`` only the image's fine scales are compared: ``mean |r - G_s * r|``
+    for the residual ``r = J - log(L + eps)``, with ``G_s * r`` its normalised-convolution
+    Gaussian low-pass of ``s`` pixels (zero weight outside the image, so a constant, and with it
+    the offset ``b_c``, is removed exactly up to the border). The HPF image's large scales are the
+    leaky integrator's weakest (it forgets slow, large changes), and the events' long windows say
+    more about them (:mod:`fusiongs.losses.event_lowpass`).
+
     Args:
         render: ``[..., H, W, C]`` linear render at the image's time.
         hpf_log_image: ``[..., H, W, C]`` HPF intensity image in natural-log units (any offset).
         eps: log offset, as in the event losses.
+        highpass: the Gaussian's standard deviation (pixels), 0 for the whole image.
 
     Returns:
         Scalar loss in log units.
@@ -72,6 +81,11 @@ def intensity_prior_loss(
     _check_pair("intensity_prior_loss", render, hpf_log_image)
     log_r = torch.log(render + eps)
     resid = hpf_log_image - log_r
+    if highpass > 0:
+        h, w, c = resid.shape[-3:]
+        maps = resid.reshape(-1, h, w, c).permute(0, 3, 1, 2).reshape(-1, h, w)  # [N C, H, W]
+        low = gaussian_blur(maps, highpass) / gaussian_blur(torch.ones_like(maps[:1]), highpass)
+        return (maps - low).abs().mean()
     flat = resid.detach().flatten(-3, -2)  # [..., H*W, C]
     offset = flat.median(dim=-2).values[..., None, None, :]  # [..., 1, 1, C]
     return (log_r + offset - hpf_log_image).abs().mean()

@@ -17,10 +17,12 @@ from fusiongs.train.state import FusionState
 
 
 def lowpass_term_pairwise(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: torch.Tensor,
-                          ends: list[tuple[int, float, int]], min_length: float) -> torch.Tensor | None:
+                          ends: list[tuple[int, float, int]], min_length: float,
+                          n_current: int | None = None) -> torch.Tensor | None:
     """:func:`~fusiongs.train.lowpass_term.lowpass_term` (same arguments and result), one window
-    pair at a time."""
-    pairs = cross_pairs(ends, min_length)
+    pair at a time. Kept ends of earlier steps are given as renders: ``lin[n_current:]`` (detached),
+    with their own windows in ``ends`` (see :func:`~fusiongs.train.lowpass_term.cross_pairs`)."""
+    pairs = cross_pairs(ends, min_length, n_current)
     if not pairs:
         return None
     ev, device = cfg.events, lin.device

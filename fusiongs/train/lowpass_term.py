@@ -11,6 +11,8 @@ session 14).
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 import torch
 
@@ -44,11 +46,33 @@ def support_map(data: TrainData, sigma: float, device: torch.device) -> torch.Te
     return data.lowpass_support[1]
 
 
-def cross_pairs(ends: list[tuple[int, float, int]], min_length: float) -> list[tuple[int, int, float, float]]:
+class LowpassHistory:
+    """The window ends of the last ``steps`` training steps: ``(t seconds, log image [H*W])``, the
+    log intensity each pixel's own channel saw (detached), oldest first; each step's ends replace
+    the oldest step's once ``steps`` are kept."""
+
+    def __init__(self, steps: int):
+        self.steps = int(steps)
+        self._rows: deque[list[tuple[float, torch.Tensor]]] = deque(maxlen=max(self.steps, 1))
+
+    def ends(self) -> list[tuple[float, torch.Tensor]]:
+        """Every kept end, oldest step first."""
+        return [row for step in self._rows for row in step]
+
+    def push(self, ends: list[tuple[float, torch.Tensor]]) -> None:
+        """Keep one step's ends: ``(t seconds, log image [H*W])`` each (kept detached)."""
+        if self.steps > 0:
+            self._rows.append([(t, row.detach()) for t, row in ends])
+
+
+def cross_pairs(ends: list[tuple[int, float, int]], min_length: float,
+                n_current: int | None = None) -> list[tuple[int, int, float, float]]:
     """Pairs of window ends from different windows, in time order, at least ``min_length`` s apart.
 
     Args:
         ends: ``(render index, t seconds, window)`` of each rendered window end.
+        n_current: when given, render indices from it on are kept ends of earlier steps
+            (:class:`LowpassHistory`), and a pair of two such ends is left out (it has no gradient).
 
     Returns:
         ``(render index at t_a, render index at t_b, t_a, t_b)`` with ``t_a < t_b``.
@@ -58,22 +82,47 @@ def cross_pairs(ends: list[tuple[int, float, int]], min_length: float) -> list[t
         for jb, tb, wb in ends[i + 1:]:
             if wa == wb or abs(tb - ta) < min_length:
                 continue
+            if n_current is not None and ja >= n_current and jb >= n_current:
+                continue
             out.append((ja, jb, ta, tb) if ta < tb else (jb, ja, tb, ta))
     return out
 
 
+def own_logs(data: TrainData, cfg: DeblurConfig, lin: torch.Tensor) -> torch.Tensor:
+    """``[T, H*W]`` log intensity of linear renders ``[T, H, W, 3]`` as each pixel sees it (grey
+    sensor, or the pixel's own CFA channel)."""
+    ev = cfg.events
+    flat = lin.reshape(lin.shape[0], -1, 3)  # [T, P, 3]
+    if data.cfa_index is None:
+        return log_intensity(flat, "grey", ev.grey_weights, ev.log_eps)[..., 0]
+    return select_channel(log_intensity(flat, "rgb", eps=ev.log_eps), data.cfa_index.reshape(-1))[..., 0]
+
+
 def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: torch.Tensor,
-                 ends: list[tuple[int, float, int]], min_length: float) -> torch.Tensor | None:
+                 ends: list[tuple[int, float, int]], min_length: float,
+                 history: LowpassHistory | None = None) -> torch.Tensor | None:
     """Low-pass event loss (:func:`fusiongs.losses.event_lowpass.event_loss_lowpass`) of the
     :func:`cross_pairs` of the step's window ends, from its whole-sensor linear renders
     ``lin [T, H, W, 3]`` (grey sensor, or each pixel's own CFA channel: the raw grid, whatever
-    ``events.colour_mode``); None when there is no such pair."""
-    pairs = cross_pairs(ends, min_length)
-    if not pairs:
-        return None
+    ``events.colour_mode``); None when there is no such pair.
+
+    With ``history``, the kept ends of earlier steps take part too (pairs with a current end
+    only), and this step's ends are then kept in it."""
     ev = cfg.events
     device = lin.device
     h, w = data.camera.height, data.camera.width
+    logs = own_logs(data, cfg, lin)  # [T, P]: each render's log once, a pair's change a difference
+    past = [] if history is None else history.ends()
+    if history is not None:
+        rows = logs.unbind(0)  # no index tensor (a host-to-device copy)
+        history.push([(t, rows[j]) for j, t, _ in ends])
+    if past:
+        n_win = 1 + max(k for *_, k in ends)  # past ends: one window each, after the current ones
+        ends = ends + [(len(lin) + i, t, n_win + i) for i, (t, _) in enumerate(past)]
+        logs = torch.cat([logs, torch.stack([row for _, row in past])])
+    pairs = cross_pairs(ends, min_length, len(lin) if past else None)
+    if not pairs:
+        return None
     pix = torch.arange(h * w, device=device)
     times = sorted({t for _, t, _ in ends})
     rank = {t: k for k, t in enumerate(times)}
@@ -81,16 +130,12 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
     rows = torch.tensor([[a for a, *_ in pairs], [b for _, b, *_ in pairs],
                          [rank[ta] for *_, ta, _ in pairs], [rank[tb] for *_, tb in pairs]],
                         device="cpu").to(device, non_blocking=True)
-    flat = lin.reshape(lin.shape[0], -1, 3)  # [T, P, 3]
     t_mid = 0.5 * (pairs[0][2] + pairs[0][3])  # a drifting θ is taken at the first pair's middle
-    if data.cfa_index is None:  # each render's log once; a pair's change is a difference of two
-        logs = log_intensity(flat, "grey", ev.grey_weights, ev.log_eps)[..., 0]  # [T, P]
+    if data.cfa_index is None:
         th_p, th_n = state.threshold.theta(pix, t=t_mid)
         channel, channels = None, 1
     else:
-        ch = data.cfa_index.reshape(-1)
-        logs = select_channel(log_intensity(flat, "rgb", eps=ev.log_eps), ch)[..., 0]  # [T, P]
-        th_p, th_n = state.threshold.theta(pix, t=t_mid, channel=ch)
+        th_p, th_n = state.threshold.theta(pix, t=t_mid, channel=data.cfa_index.reshape(-1))
         channel, channels = data.cfa_index, 3
     d = logs[rows[1]] - logs[rows[0]]  # [B, P]: delta_log of each pair
     cum, cum_fast = data.cumulative_counts(times, device)  # [K, 2, P], [K, P] | None

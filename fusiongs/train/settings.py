@@ -115,13 +115,17 @@ class EventSettings:
                                      # windows' ends (train/lowpass_term.py; scenes without frames,
                                      # where nothing else fixes large scales); 0 off
     lowpass_sigma: float = 4.0       # its Gaussian (pixels)
+    lowpass_history: int = 0         # ... also between this step's ends and those of the last
+                                     # this many steps (kept log images; no extra render)
 
     def __post_init__(self) -> None:
         _need_positive("events", self, ("censor", "max_window", "window_events", "lowpass_weight"),
                        zero_ok=True)
         _need_positive("events", self, ("lowpass_sigma",))
-        if self.censor_radius < 0:
-            raise ConfigError("config", "events.censor_radius", "an integer >= 0", repr(self.censor_radius))
+        for name in ("censor_radius", "lowpass_history"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+                raise ConfigError("config", f"events.{name}", "an integer >= 0", repr(v))
 
 
 @dataclass
@@ -156,6 +160,11 @@ class EventOnlySettings:
     alpha_ramp: int = 300            # iterations of linear ramp of α
     hpf_readouts: int = 200          # instants the HPF intensity image is precomputed at
     intensity_tau: float = 0.05      # τ of the HPF intensity image (s)
+    anchor_highpass: float = 0.0     # > 0: the anchor compares only scales finer than a Gaussian
+                                     # of this many pixels (priors.intensity_prior_loss)
+
+    def __post_init__(self) -> None:
+        _need_positive("event_only", self, ("anchor_highpass",), zero_ok=True)
 
 
 @dataclass

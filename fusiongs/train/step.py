@@ -32,7 +32,7 @@ from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.crop import Crop
 from fusiongs.train.data import TrainData, block_mean
-from fusiongs.train.lowpass_term import lowpass_term
+from fusiongs.train.lowpass_term import LowpassHistory, lowpass_term
 from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
@@ -194,7 +194,8 @@ def own_channel(linear: torch.Tensor, data: TrainData, grey_weights) -> torch.Te
 
 def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame: int,
                   lam_ev: float, gen: torch.Generator, it: int = 0, coarse: int = 1, *,
-                  device_gen: torch.Generator | None = None) -> StepResult:
+                  device_gen: torch.Generator | None = None,
+                  lowpass_history: LowpassHistory | None = None) -> StepResult:
     """Render and compute the losses of one iteration (METHOD.md §3).
 
     With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
@@ -211,6 +212,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         lam_ev: event weight now (0 during the warm-up: no event renders are made then, except
             in event-only mode).
         it: the iteration (for the EDI prior's schedule).
+        lowpass_history: the window ends of earlier steps for the low-pass term
+            (``events.lowpass_history``); it is given this step's ends.
         coarse: render at ``1/coarse`` resolution against block-averaged frames (only without
             events in this step: count maps do not average like log intensities), with
             ``blur.coarse_n_samples`` renders per exposure when set.
@@ -285,7 +288,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             parts["event"] = l_ev.detach()
         if lam_ev > 0 and cfg.events.lowpass_weight > 0 and not has_frames and len(free):
             ends = [(base + 2 * i + k, t, i) for i, ab in enumerate(free.tolist()) for k, t in enumerate(ab)]
-            l_lp = lowpass_term(state, data, cfg, lin, ends, longest)
+            l_lp = lowpass_term(state, data, cfg, lin, ends, longest, lowpass_history)
             if l_lp is not None:
                 loss = loss + lam_ev * cfg.events.lowpass_weight * l_lp
                 parts["event_lowpass"] = l_lp.detach()
@@ -293,7 +296,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             readout = readout.tolist()
             seen = [own_channel(lin[base + 2 * i + 1], data, cfg.events.grey_weights)
                     for i in range(len(readout))]
-            l_int = sum(intensity_prior_loss(v, data.hpf[g], cfg.events.log_eps)
+            l_int = sum(intensity_prior_loss(v, data.hpf[g], cfg.events.log_eps,
+                                             cfg.event_only.anchor_highpass)
                         for v, g in zip(seen, readout)) / len(readout)
             loss = loss + (1.0 - lam_ev) * l_int
             parts["intensity"] = l_int.detach()

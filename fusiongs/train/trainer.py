@@ -41,6 +41,7 @@ from fusiongs.train.data import (
     pvc_readouts,
 )
 from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
+from fusiongs.train.lowpass_term import LowpassHistory
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, event_stereo_start, scene_extent
@@ -250,6 +251,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                disable=not (cfg.output.progress and tty), desc="fusiongs", dynamic_ncols=True,
                file=sys.stderr)
     pending: list[PendingRow] = []
+    # kept window ends of the last steps (not in the checkpoint: a resumed run starts it empty)
+    lp_history = LowpassHistory(cfg.events.lowpass_history) if cfg.events.lowpass_history else None
     probe = truth_probe(scene) if cfg.output.truth_every > 0 else None
     t_begin, seconds_before = time.perf_counter(), history.seconds
 
@@ -266,7 +269,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             lam_ev = _event_weight(cfg, data, it)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
             res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev),
-                                device_gen=device_gen)
+                                device_gen=device_gen, lowpass_history=lp_history)
             strategy.step_pre_backward(res.meta)
             loss = res.loss + _regularisers(state, cfg, data.n_frames)
             t_back = time.perf_counter()

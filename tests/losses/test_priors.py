@@ -48,3 +48,57 @@ def test_intensity_prior_gradient_finite_and_shape_check():
     with pytest.raises(InputError, match="render/target"):
         intensity_prior_loss(render, torch.zeros(4, 4, 3))
     assert math.isfinite(edi_prior_loss(torch.zeros(2, 2, 3), torch.zeros(2, 2, 3)).item())
+
+
+def _highpass_reference(resid: torch.Tensor, sigma: float) -> torch.Tensor:
+    """``[H, W, C]`` residual minus its normalised Gaussian low-pass, pixel by pixel (float64):
+    the weights of the image's pixels within ``ceil(3 sigma)`` (a square), divided by their sum."""
+    h, w, _ = resid.shape
+    r = math.ceil(3.0 * sigma)
+    out = torch.empty_like(resid)
+    for y in range(h):
+        for x in range(w):
+            ys, xs = range(max(0, y - r), min(h, y + r + 1)), range(max(0, x - r), min(w, x + r + 1))
+            wts = torch.tensor([[math.exp(-((yy - y) ** 2 + (xx - x) ** 2) / (2 * sigma**2)) for xx in xs]
+                                for yy in ys], dtype=resid.dtype)
+            patch = resid[ys.start:ys.stop, xs.start:xs.stop]
+            out[y, x] = resid[y, x] - (wts[..., None] * patch).sum((0, 1)) / wts.sum()
+    return out
+
+
+def test_intensity_prior_highpass_matches_pixel_by_pixel_reference():
+    g = torch.Generator().manual_seed(3)
+    render = (torch.rand(9, 11, 3, generator=g, dtype=torch.float64) + 0.1).requires_grad_(True)
+    hpf = torch.randn(9, 11, 3, generator=g, dtype=torch.float64)
+    loss = intensity_prior_loss(render, hpf, highpass=1.5)
+    ref = _highpass_reference(hpf - torch.log(render + 1e-3), 1.5).abs().mean()
+    assert loss.item() == pytest.approx(ref.item(), rel=1e-9)
+    (grad,) = torch.autograd.grad(loss, render)
+    (grad_ref,) = torch.autograd.grad(ref, render)
+    assert torch.allclose(grad, grad_ref, rtol=1e-9, atol=1e-12)
+
+
+def test_intensity_prior_highpass_ignores_offsets_and_large_scales_not_texture():
+    g = torch.Generator().manual_seed(1)
+    render = torch.rand(2, 40, 48, 3, generator=g) + 0.1
+    log_r = torch.log(render + 1e-3)
+    offset = torch.tensor([0.3, -2.0, 5.0])
+    assert intensity_prior_loss(render, log_r + offset, highpass=4.0).item() == pytest.approx(0.0, abs=1e-5)
+    yy, xx = torch.meshgrid(torch.arange(40.0), torch.arange(48.0), indexing="ij")
+    smooth = (0.5 * torch.sin(xx / 15.0) * torch.cos(yy / 13.0))[..., None]  # scales >> 4 px
+    whole = intensity_prior_loss(render, log_r + smooth)
+    fine = intensity_prior_loss(render, log_r + smooth, highpass=4.0)
+    assert fine < 0.2 * whole  # (what is left is mostly the border, where a slope is not kept)
+    texture = 0.3 * torch.randn(2, 40, 48, 3, generator=g)  # pixel-scale differences are kept
+    whole = intensity_prior_loss(render, log_r + texture)
+    fine = intensity_prior_loss(render, log_r + texture, highpass=4.0)
+    assert 0.8 * whole < fine < 1.2 * whole
+
+
+def test_anchor_highpass_setting_is_checked_and_off_by_default():
+    from fusiongs.errors import ConfigError
+    from fusiongs.train.pipeline import resolve_config
+
+    with pytest.raises(ConfigError, match=r"event_only.anchor_highpass: expected a finite number >= 0"):
+        resolve_config("event_only", ["event_only.anchor_highpass=-1"])
+    assert resolve_config("event_only", []).event_only.anchor_highpass == 0.0

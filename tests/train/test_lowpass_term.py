@@ -85,3 +85,46 @@ def test_lowpass_term_matches_the_pair_by_pair_reference_with_gradients(data, ra
     for gf, gs in zip(grads_fast, grads_slow):
         assert torch.allclose(gf, gs, rtol=1e-5, atol=1e-9)
     assert all(float(gf.abs().sum()) > 0 for gf in grads_fast)
+
+
+def test_kept_ends_of_earlier_steps_match_the_reference_and_carry_no_gradient(data):
+    """``events.lowpass_history``: a step's ends against those of the two steps before it (kept as
+    log images) give the reference's loss on the renders of all three steps, the earlier ones
+    detached; pairs of two kept ends are left out, and the history keeps two steps."""
+    from fusiongs.train.lowpass_term import LowpassHistory, cross_pairs
+
+    cfg = resolve_config("event_only", ["events.censor_radius=1", "events.lowpass_history=2"])
+    h, w = data.camera.height, data.camera.width
+    channels = 1 if data.cfa_index is None else 3
+    state = SimpleNamespace(threshold=ContrastThreshold(channels=channels, init=(0.2, 0.3)))
+    g = torch.Generator().manual_seed(5)
+    history = LowpassHistory(2)
+    steps = []
+    for k in range(4):  # the first step keeps nothing, the fourth forgets the first
+        t = _times(data, 4, 10 + k)
+        ends = [(0, t[0], 0), (1, t[2], 0), (2, t[1], 1), (3, t[3], 1)]
+        lin = (0.05 + torch.rand(4, h, w, 3, generator=g)).requires_grad_(True)
+        kept = list(steps[-2:])
+        fast = lowpass_term(state, data, cfg, lin, ends, 0.0, history)
+        steps.append((lin.detach(), [t for _, t, _ in ends]))
+        if not kept:
+            assert torch.allclose(fast, lowpass_term_pairwise(state, data, cfg, lin, ends, 0.0), rtol=1e-6)
+            continue
+        past_lin = torch.cat([p for p, _ in kept])
+        past_t = [t for _, ts in kept for t in ts]
+        all_ends = ends + [(4 + i, tp, 2 + i) for i, tp in enumerate(past_t)]
+        slow = lowpass_term_pairwise(state, data, cfg, torch.cat([lin, past_lin]), all_ends, 0.0, n_current=4)
+        assert len(cross_pairs(all_ends, 0.0, 4)) == 4 + 4 * len(past_t)  # none of two kept ends
+        assert torch.allclose(fast, slow, rtol=1e-6, atol=0)
+        params = [lin, *state.threshold.parameters()]
+        for gf, gs in zip(torch.autograd.grad(fast, params), torch.autograd.grad(slow, params)):
+            assert torch.allclose(gf, gs, rtol=1e-5, atol=1e-9)
+    assert len(history.ends()) == 8 and [t for t, _ in history.ends()] == steps[-2][1] + steps[-1][1]
+
+
+def test_lowpass_history_setting_is_an_integer_at_least_zero():
+    from fusiongs.errors import ConfigError
+
+    with pytest.raises(ConfigError, match=r"events.lowpass_history: expected an integer >= 0"):
+        resolve_config("event_only", ["events.lowpass_history=-1"])
+    assert resolve_config("event_only", []).events.lowpass_history == 0
