@@ -95,7 +95,8 @@ def own_logs(data: TrainData, cfg: DeblurConfig, lin: torch.Tensor) -> torch.Ten
     flat = lin.reshape(lin.shape[0], -1, 3)  # [T, P, 3]
     if data.cfa_index is None:
         return log_intensity(flat, "grey", ev.grey_weights, ev.log_eps)[..., 0]
-    return select_channel(log_intensity(flat, "rgb", eps=ev.log_eps), data.cfa_index.reshape(-1))[..., 0]
+    # the channel first, then its log: a third of the logs (and of their backward)
+    return log_intensity(select_channel(flat, data.cfa_index.reshape(-1)), "rgb", eps=ev.log_eps)[..., 0]
 
 
 def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: torch.Tensor,

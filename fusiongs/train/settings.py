@@ -122,10 +122,9 @@ class EventSettings:
         _need_positive("events", self, ("censor", "max_window", "window_events", "lowpass_weight"),
                        zero_ok=True)
         _need_positive("events", self, ("lowpass_sigma",))
-        for name in ("censor_radius", "lowpass_history"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or isinstance(v, bool) or v < 0:
-                raise ConfigError("config", f"events.{name}", "an integer >= 0", repr(v))
+        for name in ("censor_radius", "lowpass_history"):  # integers: the config loader checks
+            if getattr(self, name) < 0:
+                raise ConfigError("config", f"events.{name}", "an integer >= 0", repr(getattr(self, name)))
 
 
 @dataclass
