@@ -32,6 +32,7 @@ frames; the hook is installed only in this process (no production code path chan
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import os
 import sys
@@ -204,6 +205,57 @@ def install_true_theta(scene: Path) -> None:
     ContrastThreshold.theta = theta
 
 
+def install_anchor_from(other: Path) -> None:
+    """Take the HPF anchor images and the stereo images of the first Gaussians from the events of
+    ``other`` (the same scene written with another sensor model, e.g. ``--sensor refractory_s=0``'s
+    output) while the event loss keeps the scene's own events: whether a sensor effect does its
+    harm through the anchor and the first geometry or through the event term."""
+    import fusiongs.train.trainer as trainer
+    from fusiongs.io.scene_io import load_scene
+
+    events = load_scene(other).events
+    hpf, stereo = trainer.hpf_images, trainer.event_stereo_images
+    trainer.hpf_images = lambda _events, *a, **k: hpf(events, *a, **k)
+    trainer.event_stereo_images = lambda _events, *a, **k: stereo(events, *a, **k)
+
+
+def install_censor_from(other: Path, twin_counts: bool = False) -> None:
+    """Take the censored counts (which pixels' counts in a window are lower bounds,
+    ``TrainData.censored_map`` and the fast rows of ``cumulative_counts``) from the events of
+    ``other`` while the counts themselves stay the scene's own: trained on a scene without dead
+    time with ``other`` its dead-time twin, what the information at the censored pixels is worth
+    apart from the losses the censoring misses. ``twin_counts``: the censored pixels' counts are
+    ``other``'s too (lower bounds as short as the dead-time sensor's), so that only the losses the
+    censoring misses are undone."""
+    import fusiongs.train.trainer as trainer
+    from fusiongs.events.stats import dead_time_us
+    from fusiongs.io.scene_io import load_scene
+    from fusiongs.train.data import fast_events
+
+    events = load_scene(other).events
+    own = trainer.censor_events
+
+    def censor_events(data, cfg, theta0, device):
+        twin = copy.copy(data)
+        twin.events, twin.event_index, twin._coarse = events, None, {}
+        twin.fast = fast_events(events, cfg.events.censor * dead_time_us(events), device)
+        cumulative = type(data).cumulative_counts
+        data.censored_map = twin.censored_map
+        if twin_counts:
+            own_counts = type(data).count_maps
+
+            def count_maps(t_a, t_b, dev):
+                cens = twin.censored_map(t_a, t_b).to(dev)
+                return torch.where(cens, twin.count_maps(t_a, t_b, dev), own_counts(data, t_a, t_b, dev))
+
+            data.count_maps = count_maps
+        data.cumulative_counts = lambda times, dev: (cumulative(data, times, dev)[0],
+                                                     cumulative(twin, times, dev)[1])
+        return own(data, cfg, theta0, device)
+
+    trainer.censor_events = censor_events
+
+
 def stereo_accuracy(scene_path: Path, config: str = "event_only", n_truth: int = 30000) -> dict:
     """How close the event-only stereo points (:func:`fusiongs.train.trainer.init_images` at the
     trainer's :data:`EVENT_ONLY_VIEWS` instants, the config's depth range and confidence) lie to
@@ -267,6 +319,12 @@ def main(argv=None) -> int:
                         "changed, e.g. refractory_s=0,ba_rate_hz=0,hot_pixel_fraction=0,leak_rate_hz=0")
     p.add_argument("--stereo-accuracy", action="store_true",
                    help="print how close the events' stereo points lie to the true surfaces and exit")
+    p.add_argument("--anchor-from", type=Path, default=None,
+                   help="HPF anchor and stereo images from this scene's events (same scene, another sensor)")
+    p.add_argument("--censor-from", type=Path, default=None,
+                   help="censored counts from this scene's events (same scene, another sensor)")
+    p.add_argument("--twin-counts", action="store_true",
+                   help="with --censor-from: the censored pixels' counts from that scene too")
     p.add_argument("--config", default="event_only")
     p.add_argument("overrides", nargs="*")
     args = p.parse_intermixed_args(argv)
@@ -301,6 +359,10 @@ def main(argv=None) -> int:
         install_true_geometry(args.scene)
     if args.true_theta:
         install_true_theta(args.scene)
+    if args.anchor_from is not None:
+        install_anchor_from(args.anchor_from)
+    if args.censor_from is not None:
+        install_censor_from(args.censor_from, args.twin_counts)
     overrides = ["output.progress=false", *args.overrides, *(["events.loss=mse"] if args.oracle else [])]
     run_deblur(args.scene, args.out, config=args.config, overrides=overrides, log=lambda *_: None)
     s = summarise(args.out)
