@@ -135,7 +135,6 @@ def event_loss_mse(
     theta_neg: torch.Tensor,
     channel_weights: torch.Tensor | None = None,
     censored: torch.Tensor | None = None,
-    over_weight: float = 1.0,
 ) -> torch.Tensor:
     """Squared error of the log change against ``theta_+ n_+ - theta_- n_-`` (EventNeRF Eq. 5).
 
@@ -152,8 +151,6 @@ def event_loss_mse(
         censored: bool broadcastable to ``[P, C']``: counts that are lower bounds (the pixel hit
             its refractory period in the window), compared one-sided (:func:`censored_residual`);
             None for none.
-        over_weight: weight of the squared residual where the prediction goes beyond a nonzero
-            target (:func:`over_side`); 1 for the plain mse.
 
     Returns:
         Scalar loss in (log units)^2.
@@ -162,25 +159,11 @@ def event_loss_mse(
     r = delta_pred - target
     if censored is not None:
         r = censored_residual(r, target, censored)
-    sq = r**2
-    if over_weight != 1.0:
-        sq = torch.where(over_side(r, target), over_weight * sq, sq)
-    return _weighted_mean(sq, channel_weights)
-
-
-def over_side(residual: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-    """Bool: the prediction goes beyond a nonzero target, ``sign(target) * residual > 0``.
-
-    Events a pixel's dead time swallowed make its count short, never long (noise aside): where
-    two crossings of a fast sharp edge fall inside one dead time, one event is lost and no later
-    pair of events shows it. A weight below 1 on this side (``events.over_weight``) makes the fit
-    of such counts lean toward the larger changes the pixel saw when the same edge moved slowly.
-    """
-    return (torch.sign(target) * residual > 0) & (target != 0)
+    return _weighted_mean(r**2, channel_weights)
 
 
 def band_penalty(d_r: torch.Tensor, d_gt: torch.Tensor, beta: float, zero_tol: float = 0.0,
-                 censored: torch.Tensor | None = None, over_weight: float = 1.0) -> torch.Tensor:
+                 censored: torch.Tensor | None = None) -> torch.Tensor:
     """Event-3DGS Eq. 15, elementwise, in count units.
 
     ``relu(|D_r - D_gt - beta| - beta)`` where ``D_gt > 0`` (zero for ``D_r`` in
@@ -196,17 +179,12 @@ def band_penalty(d_r: torch.Tensor, d_gt: torch.Tensor, beta: float, zero_tol: f
         beta: band half-width (0.5 for real data, 0 for clean synthetic data).
         zero_tol: ``|D_gt|`` at or below it counts as "no event" (0 for integer counts).
         censored: bool broadcastable to ``d_r``, or None for none.
-        over_weight: weight of the far side of the band (beyond ``D_gt + 2 beta`` for ``D_gt > 0``,
-            below ``D_gt - 2 beta`` for ``D_gt < 0``, see :func:`over_side`); 1 for Eq. 15.
 
     Returns:
         ``[...]`` non-negative penalty.
     """
     pos = torch.relu((d_r - d_gt - beta).abs() - beta)
     neg = torch.relu((d_gt - d_r - beta).abs() - beta)
-    if over_weight != 1.0:  # Eq. 15 is relu(short) + relu(far) with the far side from 2 beta on
-        pos = torch.relu(d_gt - d_r) + over_weight * torch.relu(d_r - d_gt - 2.0 * beta)
-        neg = torch.relu(d_r - d_gt) + over_weight * torch.relu(d_gt - d_r - 2.0 * beta)
     if censored is not None:
         pos = torch.where(censored, torch.relu(d_gt - d_r), pos)
         neg = torch.where(censored, torch.relu(d_r - d_gt), neg)
@@ -241,7 +219,6 @@ def event_loss_band(
     channel_weights: torch.Tensor | None = None,
     zero_tol: float = 0.0,
     censored: torch.Tensor | None = None,
-    over_weight: float = 1.0,
 ) -> torch.Tensor:
     """Event-3DGS band loss (Han et al., NeurIPS 2024, Eq. 15) with per-polarity thresholds.
 
@@ -258,7 +235,6 @@ def event_loss_band(
         zero_tol: see :func:`band_penalty`.
         censored: bool broadcastable to ``[P, C']``: counts that are lower bounds (the pixel hit
             its refractory period in the window), penalised one-sided (:func:`band_penalty`).
-        over_weight: see :func:`band_penalty`.
 
     Returns:
         Scalar loss in count units.
@@ -266,8 +242,7 @@ def event_loss_band(
     if theta_neg is None:
         theta_neg = theta_pos
     theta = polarity_theta(d_gt, delta_pred, theta_pos, theta_neg, zero_tol)
-    penalty = band_penalty(delta_pred / theta, d_gt, beta, zero_tol, censored, over_weight)
-    return _weighted_mean(penalty, channel_weights)
+    return _weighted_mean(band_penalty(delta_pred / theta, d_gt, beta, zero_tol, censored), channel_weights)
 
 
 def event_loss_pvc(

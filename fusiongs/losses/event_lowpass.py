@@ -23,8 +23,6 @@ import kornia
 import torch
 import torch.nn.functional as F
 
-from fusiongs.losses.event import over_side
-
 
 def gaussian_blur(maps: torch.Tensor, sigma: float) -> torch.Tensor:
     """``[C, H, W]`` maps blurred by a Gaussian of ``sigma`` pixels (kernel ``2 ceil(3 sigma) + 1``
@@ -86,7 +84,7 @@ def full_support(channel: torch.Tensor | None, channels: int, sigma: float, heig
 def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: torch.Tensor,
                        channel: torch.Tensor | None, channels: int, sigma: float,
                        theta: torch.Tensor | float, min_support: float = 0.2,
-                       support: torch.Tensor | None = None, over_weight: float = 1.0) -> torch.Tensor:
+                       support: torch.Tensor | None = None) -> torch.Tensor:
     """L1 distance of the low-passed rendered and event log changes of ``B`` long windows.
 
     Per window and channel this is ``|LP(delta_pred) - LP(target)|`` with the low-pass of
@@ -104,8 +102,6 @@ def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: to
             share of a fully valid neighbourhood of that channel are left out.
         support: :func:`full_support` of these arguments, when the caller keeps it (it depends
             only on the sensor); computed here when None.
-        over_weight: weight of the distance where ``LP(delta_pred)`` goes beyond a nonzero
-            ``LP(target)`` in its direction (:func:`fusiongs.losses.event.over_side`); 1 symmetric.
 
     Returns:
         Scalar: the mean over windows of the support-weighted mean over pixels and channels of
@@ -116,18 +112,12 @@ def event_loss_lowpass(delta_pred: torch.Tensor, target: torch.Tensor, valid: to
         delta_pred, target, valid = delta_pred[None], target[None], valid[None]
     masks = _channel_masks(valid, channel, channels).to(delta_pred.dtype)  # [B, C, H, W]
     b, c = masks.shape[:2]
-    parts = [masks * (delta_pred - target)[:, None], masks]
-    if over_weight != 1.0:
-        parts.append(masks * target[:, None])
-    blurred = gaussian_blur(torch.cat([x.flatten(0, 1) for x in parts]), sigma)
-    blurred = blurred.reshape(len(parts), b, c, *masks.shape[2:])
+    blurred = gaussian_blur(torch.cat([(masks * (delta_pred - target)[:, None]).flatten(0, 1),
+                                       masks.flatten(0, 1)]), sigma).reshape(2, b, c, *masks.shape[2:])
     num, den = blurred[0], blurred[1].detach()
     if support is None:
         support = full_support(channel, channels, sigma, *valid.shape[-2:], valid.device, den.dtype)
     w = den * (den >= min_support * support.to(den.dtype))
-    dist = (num / den.clamp_min(1e-6)).abs()
-    if over_weight != 1.0:
-        dist = torch.where(over_side(num, blurred[2].detach()), over_weight * dist, dist)
     # no host read of the totals (a GPU would wait): an empty support gives 0 / eps = 0
-    per = (w * dist).sum((1, 2, 3)) / w.sum((1, 2, 3)).clamp_min(1e-12)
+    per = (w * (num / den.clamp_min(1e-6)).abs()).sum((1, 2, 3)) / w.sum((1, 2, 3)).clamp_min(1e-12)
     return per.mean() / theta

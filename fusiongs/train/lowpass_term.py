@@ -148,5 +148,4 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
         valid = valid & ~(square_dilate(fast, ev.censor_radius) > 0)
     scale = 0.5 * (th_p.detach().mean() + th_n.detach().mean())
     return event_loss_lowpass(d.reshape(-1, h, w), target.reshape(-1, h, w), valid, channel, channels,
-                              ev.lowpass_sigma, scale, support=support_map(data, ev.lowpass_sigma, device),
-                              over_weight=ev.lowpass_over_weight)
+                              ev.lowpass_sigma, scale, support=support_map(data, ev.lowpass_sigma, device))

@@ -111,9 +111,6 @@ class EventSettings:
     censor: float = 2.0              # counts of pixels with two events closer than this multiple of
                                      # the estimated dead time are lower bounds (one-sided mse); 0 off
     censor_radius: int = 0           # ... and those of their neighbours within this many pixels
-    over_weight: float = 1.0         # weight of a count's far side (the prediction beyond it, in its
-                                     # direction: losses/event.py over_side), in [0, 1]; 1 symmetric
-    lowpass_over_weight: float = 1.0 # the same for the low-pass term's distance
     lowpass_weight: float = 0.0      # weight of the low-pass term on long windows between the free
                                      # windows' ends (train/lowpass_term.py; scenes without frames,
                                      # where nothing else fixes large scales); 0 off
@@ -125,9 +122,6 @@ class EventSettings:
         _need_positive("events", self, ("censor", "max_window", "window_events", "lowpass_weight"),
                        zero_ok=True)
         _need_positive("events", self, ("lowpass_sigma",))
-        for name in ("over_weight", "lowpass_over_weight"):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise ConfigError("config", f"events.{name}", "a number in [0, 1]", repr(getattr(self, name)))
         for name in ("censor_radius", "lowpass_history"):  # integers: the config loader checks
             if getattr(self, name) < 0:
                 raise ConfigError("config", f"events.{name}", "an integer >= 0", repr(getattr(self, name)))

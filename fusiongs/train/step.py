@@ -142,10 +142,9 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
         # made on the host, copied without waiting (torch.tensor(..., device=cuda) would wait)
         weights = torch.tensor(ev.channel_weights, dtype=d.dtype, device="cpu").to(device, non_blocking=True)
     if ev.loss == "mse":
-        return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights, censored, ev.over_weight)
+        return event_loss_mse(d, n_pos, n_neg, th_p, th_n, weights, censored)
     if ev.loss == "band":
-        return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights, censored=censored,
-                               over_weight=ev.over_weight)
+        return event_loss_band(d, d_gt, th_p, th_n, ev.beta, weights, censored=censored)
     return event_loss_pvc(d, d_gt, th_p, th_n, kind="band", beta=ev.beta, channel_weights=weights)
 
 

@@ -72,30 +72,3 @@ def test_censored_band_penalises_only_the_shortfall():
     assert torch.isclose(one_sided, torch.tensor((0.0 + (3.0 - 0.5)) / 2))
     assert torch.isclose(event_loss_band(delta, counts, th, th, 0.0),
                          torch.tensor(((4.5 - 3.0) + (3.0 - 0.5)) / 2))
-
-
-def test_over_weight_scales_only_the_far_side():
-    """``over_weight`` w: Eq. 15 at w = 1 (β = 0 and 0.5), the censored (one-sided) penalty at w = 0,
-    and in between the far side times w while shortfalls, "no event" pixels and the band's
-    inside are unchanged; the mse likewise, its far side's squared residual times w."""
-    d_gt = torch.tensor([3.0, 3.0, -2.0, -2.0, 0.0, 3.0])
-    d_r = torch.tensor([4.5, 1.0, -3.5, -0.5, 1.7, 3.8])
-    all_cens = torch.ones(6, dtype=torch.bool)
-    for beta in (0.0, 0.5):
-        plain = band_penalty(d_r, d_gt, beta)
-        assert torch.allclose(band_penalty(d_r, d_gt, beta, over_weight=1.0 - 1e-12), plain, atol=1e-6)
-        assert torch.allclose(band_penalty(d_r, d_gt, beta, over_weight=0.0),
-                              band_penalty(d_r, d_gt, beta, censored=all_cens), atol=1e-6)
-        half = band_penalty(d_r, d_gt, beta, over_weight=0.5)
-        far = torch.tensor([True, False, True, False, False, True])
-        assert torch.allclose(half[far], 0.5 * plain[far], atol=1e-6)
-        assert torch.allclose(half[~far], plain[~far], atol=1e-6)
-    target = torch.tensor([[0.6], [0.6], [-0.4], [0.0]])
-    pred = torch.tensor([[0.9], [0.2], [-0.7], [0.3]], requires_grad=True)
-    th = torch.tensor(0.2)
-    n_pos, n_neg = (target.clamp(min=0) / th), (-target.clamp(max=0) / th)
-    got = event_loss_mse(pred, n_pos, n_neg, th, th, over_weight=0.25)
-    sq = (pred - target) ** 2
-    expect = (0.25 * sq[0] + sq[1] + 0.25 * sq[2] + sq[3]).sum() / 4
-    assert torch.isclose(got, expect)
-    assert torch.isclose(event_loss_mse(pred, n_pos, n_neg, th, th, over_weight=1.0), sq.mean())

@@ -1,0 +1,186 @@
+"""Which event counts a sensor's dead time cuts short, and which of them the censoring marks.
+
+Issue 18 (RESULTS.md, session 31). A scene written by ``fusiongs simulate`` is re-run through the
+DVS pixel model twice at its own thresholds (per-pixel draws, threshold scale and leak as in
+``gt/sim.json``), with its refractory period and without it; noise events are left out, so the
+second stream is the first one's crossings with none lost (the model keeps the dropped crossings'
+reference, so the first stream is a subset of the second). Windows are then drawn as event-only
+training draws them (log-uniform from 1 ms to the time an average pixel takes to fire 4 events)
+and every pixel's signed count is compared between the two streams:
+
+- *wrong*: an active pixel-window whose count differs (events were lost in it);
+- *missed*: a wrong one that a censoring rule does not mark as a lower bound. Rules: the
+  default (a fast event, closer than 2 dead times to its pixel's previous one, in the window,
+  ``events.censor 2``), the same with each fast event's predecessor marking too, and with the
+  fast events' neighbours within 1 or 2 pixels (``events.censor_radius``);
+- *censored*: the share of active pixel-windows a rule marks (information given up);
+- the count corrections a stream alone allows, on the uncensored windows: the non-paralysable
+  dead-time law ``n / (1 - n r / T)`` and half of each event's bound ``r / (dt - r)`` (at most 3)
+  on the crossings lost before it; mean shortfall (true minus estimate) and mean absolute error.
+
+The default rule is the reference every row is compared with. Grey and colour sensors alike (each
+pixel sees its own channel's log intensity, as the simulator's sensor does).
+
+    PYTHONPATH=. python benchmarks/bench_dead_time_losses.py SCENE [--windows 300] [--seed 0]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.bench_event_only_diagnose import sim_config  # noqa: E402
+
+
+def pixel_streams(scene: Path) -> dict:
+    """Pixel events of ``scene`` with and without its refractory period, at its thresholds:
+    ``{"dead": (t, pixel, p), "clean": (t, pixel, p), "width", "height", "dead_us"}``."""
+    from fusiongs.sim import dvs
+    from fusiongs.sim.simulate import scene_renderer
+
+    cfg = sim_config(scene)
+    scale = float(json.loads((scene / "gt" / "sim.json").read_text())["threshold_scale"])
+    render = scene_renderer(cfg).render
+    seeds = np.random.SeedSequence(cfg.seed).spawn(7)  # the simulator's streams 1 (θ) and 6 (leak)
+    times = np.linspace(0.0, cfg.duration, int(round(cfg.duration * cfg.dvs_rate_hz)) + 1)
+    logs = np.stack([dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps) for t in times])
+    logs = logs.astype(np.float32)
+    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1], np.random.default_rng(seeds[1]),
+                                         width=cfg.width)
+    leak = {}
+    if cfg.dvs.leak_rate_hz > 0:
+        drift, phase = dvs.leak_drift(cfg.dvs, th_on, np.random.default_rng(seeds[6]))
+        leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
+    out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6}
+    for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):
+        out[name] = dvs.dvs_events(logs, times, th_on * scale, th_off * scale, r, **leak)
+    return out
+
+
+def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
+    """``[H, W]`` bool: ``mask`` or a marked pixel within ``radius`` (Chebyshev), as
+    :func:`fusiongs.train.data.square_dilate` on the censored map."""
+    h, w = mask.shape
+    pad = np.pad(mask, radius)
+    out = np.zeros_like(mask)
+    for dy in range(2 * radius + 1):
+        for dx in range(2 * radius + 1):
+            out |= pad[dy:dy + h, dx:dx + w]
+    return out
+
+
+def previous_gap(t: np.ndarray, pix: np.ndarray) -> np.ndarray:
+    """``[E]`` µs from each event to its pixel's previous event (inf for a pixel's first)."""
+    order = np.lexsort((t, pix))
+    same = np.r_[False, pix[order][1:] == pix[order][:-1]]
+    gap = np.where(same, np.r_[0, np.diff(t[order])], np.inf).astype(np.float64)
+    out = np.empty_like(gap)
+    out[order] = gap
+    return out
+
+
+def window_table(s: dict, n_windows: int, seed: int) -> dict:
+    """Shares of wrong / missed / censored pixel-windows per rule, and the corrections' errors."""
+    w, h = s["width"], s["height"]
+    n_pix, r = w * h, s["dead_us"]
+    (dt, di, dp), (ct, ci, cp) = s["dead"], s["clean"]
+    gap = previous_gap(dt, di)
+    fast = gap < 2 * r
+    pred = np.zeros_like(fast)  # the event before a fast one
+    order = np.lexsort((dt, di))
+    fo = fast[order]
+    pred[order[:-1]] = fo[1:] & (di[order][1:] == di[order][:-1])
+    bound = np.where(np.isfinite(gap) & (gap > r), np.minimum(r / np.maximum(gap - r, 1e-9), 3.0), 0.0)
+    rng = np.random.default_rng(seed)
+    longest = 4.0 / (len(dt) / n_pix)  # s: an average pixel's 4 events
+    rules = ("default", "with predecessors", "radius 1", "radius 2")
+    acc = {k: np.zeros(2) for k in rules}
+    tot = np.zeros(2)
+    corr = np.zeros(7)
+    for _ in range(n_windows):
+        dur = float(np.exp(rng.uniform(np.log(1e-3), np.log(longest))))
+        ta = rng.uniform(0.0, 1.0 - dur) * 1e6
+        tb = ta + dur * 1e6
+        md, mc = (dt >= ta) & (dt < tb), (ct >= ta) & (ct < tb)
+        nd = np.bincount(di[md], weights=dp[md].astype(float), minlength=n_pix)
+        nc = np.bincount(ci[mc], weights=cp[mc].astype(float), minlength=n_pix)
+        n_any = np.bincount(di[md], minlength=n_pix)
+        active = (n_any > 0) | (np.bincount(ci[mc], minlength=n_pix) > 0)
+        wrong = nd != nc
+        tot += [active.sum(), wrong.sum()]
+        own = np.bincount(di[md & fast], minlength=n_pix) > 0
+        marks = {"default": own,
+                 "with predecessors": own | (np.bincount(di[md & pred], minlength=n_pix) > 0)}
+        for rad in (1, 2):
+            marks[f"radius {rad}"] = dilate(own.reshape(h, w), rad).reshape(-1)
+        for k in rules:
+            acc[k] += [(wrong & ~marks[k]).sum(), (marks[k] & active).sum()]
+        sel = ~own & (n_any > 0)
+        true, emitted = np.abs(nc[sel]), np.abs(nd[sel])
+        law = emitted / np.clip(1.0 - n_any[sel] * r / (dur * 1e6), 0.2, 1.0)
+        half = emitted + 0.5 * np.bincount(di[md], weights=bound[md], minlength=n_pix)[sel]
+        corr += [sel.sum(), (true - emitted).sum(), np.abs(true - emitted).sum(), (true - law).sum(),
+                 np.abs(true - law).sum(), (true - half).sum(), np.abs(true - half).sum()]
+    return {"active": tot[0], "wrong": tot[1] / tot[0],
+            "rules": {k: (a[0] / tot[1], a[1] / tot[0]) for k, a in acc.items()},
+            "corrections": {"none": (corr[1] / corr[0], corr[2] / corr[0]),
+                            "n / (1 - n r / T)": (corr[3] / corr[0], corr[4] / corr[0]),
+                            "half of r / (dt - r)": (corr[5] / corr[0], corr[6] / corr[0])}}
+
+
+def lost_crossings(s: dict) -> dict:
+    """Lost crossings and the gap (in dead times) between the events around each."""
+    n_pix, r = s["width"] * s["height"], s["dead_us"]
+    (dt, di, _), (ct, ci, _) = s["dead"], s["clean"]
+    kd = np.sort(di.astype(np.int64) * 10**10 + dt)
+    kc = np.sort(ci.astype(np.int64) * 10**10 + ct)
+    lost = kc[~np.isin(kc, kd)]
+    j = np.searchsorted(kd, lost)
+    same = (j > 0) & (j < len(kd))
+    pixel = lost[same] // 10**10
+    same[same] = (kd[j[same] - 1] // 10**10 == pixel) & (kd[j[same]] // 10**10 == pixel)
+    g = (kd[j[same]] - kd[j[same] - 1]) / r
+    return {"crossings": len(kc), "events": len(kd), "lost": len(lost), "pixels": n_pix,
+            "next_within_2": float(np.mean(g < 2)), "gap_median": float(np.median(g)),
+            "gap_p90": float(np.quantile(g, 0.9))}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scene", type=Path)
+    p.add_argument("--windows", type=int, default=300)
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+    if not (args.scene / "gt" / "sim.json").is_file():
+        p.error(f"{args.scene / 'gt' / 'sim.json'}: not found; the scene must come from fusiongs simulate")
+    s = pixel_streams(args.scene)
+    if s["dead_us"] <= 0:
+        p.error(f"{args.scene}: its sensor has no refractory period (dvs.refractory_s = 0)")
+    lc = lost_crossings(s)
+    tab = window_table(s, args.windows, args.seed)
+    print(f"scene {args.scene}: dead time {s['dead_us']:.0f} µs; crossings {lc['crossings']} -> events "
+          f"{lc['events']} ({lc['lost'] / lc['crossings']:.1%} lost); lost crossings whose next event comes "
+          f"within 2 dead times {lc['next_within_2']:.0%}; gap around a lost crossing median "
+          f"{lc['gap_median']:.2f}, 90th percentile {lc['gap_p90']:.1f} dead times")
+    print(f"{args.windows} windows, {tab['active']:.0f} active pixel-windows, {tab['wrong']:.1%} "
+          "with a wrong count\n")
+    print("| censoring rule | wrong counts not marked | active pixel-windows censored |")
+    print("|---|---|---|")
+    ref = tab["rules"]["default"]
+    for k, (missed, cens) in tab["rules"].items():
+        print(f"| {k}{' (reference)' if k == 'default' else ''} | {missed:.1%} ({missed / ref[0]:.2f}x) "
+              f"| {cens:.1%} ({cens / ref[1]:.2f}x) |")
+    print("\n| uncensored counts | mean shortfall (crossings) | mean absolute error |")
+    print("|---|---|---|")
+    for k, (bias, mae) in tab["corrections"].items():
+        print(f"| {k}{' (reference)' if k == 'none' else ''} | {bias:.3f} | {mae:.3f} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
