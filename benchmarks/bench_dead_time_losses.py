@@ -39,7 +39,8 @@ from benchmarks.bench_event_only_diagnose import sim_config  # noqa: E402
 
 def pixel_streams(scene: Path) -> dict:
     """Pixel events of ``scene`` with and without its refractory period, at its thresholds:
-    ``{"dead": (t, pixel, p), "clean": (t, pixel, p), "width", "height", "dead_us"}``."""
+    ``{"dead": (t, pixel, p), "clean": (t, pixel, p), "width", "height", "dead_us", "duration_s"}``
+    (t in µs from the recording's start)."""
     from fusiongs.sim import dvs
     from fusiongs.sim.simulate import scene_renderer
 
@@ -56,7 +57,8 @@ def pixel_streams(scene: Path) -> dict:
     if cfg.dvs.leak_rate_hz > 0:
         drift, phase = dvs.leak_drift(cfg.dvs, th_on, np.random.default_rng(seeds[6]))
         leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
-    out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6}
+    out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6,
+           "duration_s": float(cfg.duration)}
     for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):
         out[name] = dvs.dvs_events(logs, times, th_on * scale, th_off * scale, r, **leak)
     return out
@@ -97,14 +99,15 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
     pred[order[:-1]] = fo[1:] & (di[order][1:] == di[order][:-1])
     bound = np.where(np.isfinite(gap) & (gap > r), np.minimum(r / np.maximum(gap - r, 1e-9), 3.0), 0.0)
     rng = np.random.default_rng(seed)
-    longest = 4.0 / (len(dt) / n_pix)  # s: an average pixel's 4 events
+    span = s["duration_s"]
+    longest = min(4.0 / (len(dt) / n_pix / span), span)  # s: an average pixel's 4 events
     rules = ("default", "with predecessors", "radius 1", "radius 2")
     acc = {k: np.zeros(2) for k in rules}
     tot = np.zeros(2)
     corr = np.zeros(7)
     for _ in range(n_windows):
-        dur = float(np.exp(rng.uniform(np.log(1e-3), np.log(longest))))
-        ta = rng.uniform(0.0, 1.0 - dur) * 1e6
+        dur = float(np.exp(rng.uniform(np.log(min(1e-3, longest)), np.log(longest))))
+        ta = rng.uniform(0.0, span - dur) * 1e6
         tb = ta + dur * 1e6
         md, mc = (dt >= ta) & (dt < tb), (ct >= ta) & (ct < tb)
         nd = np.bincount(di[md], weights=dp[md].astype(float), minlength=n_pix)
