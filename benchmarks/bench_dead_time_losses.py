@@ -28,13 +28,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
-import numpy as np
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")  # before torch (numba's spinning threads)
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from benchmarks.bench_event_only_diagnose import sim_config  # noqa: E402
+from fusiongs.events.stats import fast_event_mask  # noqa: E402
+from fusiongs.events.stream import EventStream  # noqa: E402
+from fusiongs.train.data import square_dilate  # noqa: E402
 
 
 def pixel_streams(scene: Path) -> dict:
@@ -65,25 +72,20 @@ def pixel_streams(scene: Path) -> dict:
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
-    """``[H, W]`` bool: ``mask`` or a marked pixel within ``radius`` (Chebyshev), as
-    :func:`fusiongs.train.data.square_dilate` on the censored map."""
-    h, w = mask.shape
-    pad = np.pad(mask, radius)
-    out = np.zeros_like(mask)
-    for dy in range(2 * radius + 1):
-        for dx in range(2 * radius + 1):
-            out |= pad[dy:dy + h, dx:dx + w]
-    return out
+    """``[H, W]`` bool: ``mask`` or a marked pixel within ``radius`` (Chebyshev): training's
+    :func:`fusiongs.train.data.square_dilate` of the censored map (``events.censor_radius``)."""
+    return (square_dilate(torch.from_numpy(mask.astype(np.float32)), radius) > 0).numpy()
 
 
-def previous_gap(t: np.ndarray, pix: np.ndarray) -> np.ndarray:
-    """``[E]`` µs from each event to its pixel's previous event (inf for a pixel's first)."""
+def previous_gap(t: np.ndarray, pix: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``([E] µs from each event to its pixel's previous event (inf for a pixel's first), [E] the
+    events' order by pixel, then time)``."""
     order = np.lexsort((t, pix))
     same = np.r_[False, pix[order][1:] == pix[order][:-1]]
     gap = np.where(same, np.r_[0, np.diff(t[order])], np.inf).astype(np.float64)
     out = np.empty_like(gap)
     out[order] = gap
-    return out
+    return out, order
 
 
 def window_table(s: dict, n_windows: int, seed: int) -> dict:
@@ -91,12 +93,12 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
     w, h = s["width"], s["height"]
     n_pix, r = w * h, s["dead_us"]
     (dt, di, dp), (ct, ci, cp) = s["dead"], s["clean"]
-    gap = previous_gap(dt, di)
-    fast = gap < 2 * r
-    pred = np.zeros_like(fast)  # the event before a fast one
-    order = np.lexsort((dt, di))
-    fo = fast[order]
-    pred[order[:-1]] = fo[1:] & (di[order][1:] == di[order][:-1])
+    gap, order = previous_gap(dt, di)
+    # training's rule (events.censor 2): fast_event_mask of the stream, at the true dead time
+    stream = EventStream.create(dt, di % w, di // w, dp, w, h, None)
+    fast = fast_event_mask(stream, 2 * r)
+    pred = np.zeros_like(fast)  # the event before a fast one (a fast event's predecessor is its pixel's)
+    pred[order[:-1]] = fast[order[1:]]
     bound = np.where(np.isfinite(gap) & (gap > r), np.minimum(r / np.maximum(gap - r, 1e-9), 3.0), 0.0)
     rng = np.random.default_rng(seed)
     span = s["duration_s"]
@@ -159,6 +161,8 @@ def main(argv=None) -> int:
     p.add_argument("--windows", type=int, default=300)
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
+    if args.windows < 1:
+        p.error(f"--windows: expected an integer >= 1, got {args.windows}")
     if not (args.scene / "gt" / "sim.json").is_file():
         p.error(f"{args.scene / 'gt' / 'sim.json'}: not found; the scene must come from fusiongs simulate")
     s = pixel_streams(args.scene)

@@ -205,34 +205,31 @@ def install_true_theta(scene: Path) -> None:
     ContrastThreshold.theta = theta
 
 
-def install_anchor_from(other: Path) -> None:
-    """Take the HPF anchor images and the stereo images of the first Gaussians from the events of
-    ``other`` (the same scene written with another sensor model, e.g. ``--sensor refractory_s=0``'s
-    output) while the event loss keeps the scene's own events: whether a sensor effect does its
-    harm through the anchor and the first geometry or through the event term."""
+def install_anchor_from(events) -> None:
+    """Take the HPF anchor images and the stereo images of the first Gaussians from ``events``, a
+    twin's (:func:`twin_events`: the same scene written with another sensor model, e.g.
+    ``--sensor refractory_s=0``'s output), while the event loss keeps the scene's own events:
+    whether a sensor effect does its harm through the anchor and the first geometry or through the
+    event term."""
     import fusiongs.train.trainer as trainer
-    from fusiongs.io.scene_io import load_scene
 
-    events = load_scene(other).events
     hpf, stereo = trainer.hpf_images, trainer.event_stereo_images
     trainer.hpf_images = lambda _events, *a, **k: hpf(events, *a, **k)
     trainer.event_stereo_images = lambda _events, *a, **k: stereo(events, *a, **k)
 
 
-def install_censor_from(other: Path, twin_counts: bool = False) -> None:
+def install_censor_from(events, twin_counts: bool = False) -> None:
     """Take the censored counts (which pixels' counts in a window are lower bounds,
     ``TrainData.censored_map`` and the fast rows of ``cumulative_counts``) from the events of
-    ``other`` while the counts themselves stay the scene's own: trained on a scene without dead
-    time with ``other`` its dead-time twin, what the information at the censored pixels is worth
-    apart from the losses the censoring misses. ``twin_counts``: the censored pixels' counts are
-    ``other``'s too (lower bounds as short as the dead-time sensor's), so that only the losses the
-    censoring misses are undone."""
+    ``events`` (:func:`twin_events`) while the counts themselves stay the scene's own: trained on
+    a scene without dead time with ``events`` its dead-time twin's, what the information at the
+    censored pixels is worth apart from the losses the censoring misses. ``twin_counts``: the
+    censored pixels' counts are the twin's too (lower bounds as short as the dead-time sensor's),
+    so that only the losses the censoring misses are undone."""
     import fusiongs.train.trainer as trainer
     from fusiongs.events.stats import dead_time_us
-    from fusiongs.io.scene_io import load_scene
     from fusiongs.train.data import fast_events
 
-    events = load_scene(other).events
     own = trainer.censor_events
 
     def censor_events(data, cfg, theta0, device):
@@ -254,6 +251,24 @@ def install_censor_from(other: Path, twin_counts: bool = False) -> None:
         return own(data, cfg, theta0, device)
 
     trainer.censor_events = censor_events
+
+
+def twin_events(other: Path, scene: Path, option: str):
+    """The events of ``other``, checked to be a twin of ``scene`` (the same sensor size); raises
+    ``ValueError`` with one line naming ``option`` and the folder otherwise."""
+    from fusiongs.errors import FusionGSError
+    from fusiongs.io.scene_io import load_scene
+
+    try:
+        events, own = load_scene(other).events, load_scene(scene).camera
+    except FusionGSError as err:
+        raise ValueError(f"{option}: {err}") from None
+    if events is None or not len(events):
+        raise ValueError(f"{option}: {other}: expected a scene with events, got none")
+    if (events.width, events.height) != (own.width, own.height):
+        raise ValueError(f"{option}: {other}: expected a twin of {scene} ({own.width}x{own.height} "
+                         f"events), got {events.width}x{events.height}")
+    return events
 
 
 def stereo_accuracy(scene_path: Path, config: str = "event_only", n_truth: int = 30000) -> dict:
@@ -359,10 +374,17 @@ def main(argv=None) -> int:
         install_true_geometry(args.scene)
     if args.true_theta:
         install_true_theta(args.scene)
-    if args.anchor_from is not None:
-        install_anchor_from(args.anchor_from)
-    if args.censor_from is not None:
-        install_censor_from(args.censor_from, args.twin_counts)
+    if args.twin_counts and args.censor_from is None:
+        p.error("--twin-counts: only with --censor-from")
+    try:
+        options = (("--anchor-from", args.anchor_from), ("--censor-from", args.censor_from))
+        twins = {opt: twin_events(path, args.scene, opt) for opt, path in options if path is not None}
+    except ValueError as err:
+        p.error(str(err))
+    if "--anchor-from" in twins:
+        install_anchor_from(twins["--anchor-from"])
+    if "--censor-from" in twins:
+        install_censor_from(twins["--censor-from"], args.twin_counts)
     overrides = ["output.progress=false", *args.overrides, *(["events.loss=mse"] if args.oracle else [])]
     run_deblur(args.scene, args.out, config=args.config, overrides=overrides, log=lambda *_: None)
     s = summarise(args.out)

@@ -112,18 +112,22 @@ def lowpass_term(state: FusionState, data: TrainData, cfg: DeblurConfig, lin: to
     ev = cfg.events
     device = lin.device
     h, w = data.camera.height, data.camera.width
-    logs = own_logs(data, cfg, lin)  # [T, P]: each render's log once, a pair's change a difference
     past = [] if history is None else history.ends()
-    if history is not None:
-        rows = logs.unbind(0)  # no index tensor (a host-to-device copy)
-        history.push([(t, rows[j]) for j, t, _ in ends])
+    current = ends
     if past:
         n_win = 1 + max(k for *_, k in ends)  # past ends: one window each, after the current ones
         ends = ends + [(len(lin) + i, t, n_win + i) for i, (t, _) in enumerate(past)]
-        logs = torch.cat([logs, torch.stack([row for _, row in past])])
     pairs = cross_pairs(ends, min_length, len(lin) if past else None)
+    if not pairs and history is None:
+        return None  # nothing to compare and nothing to keep: no logs taken
+    logs = own_logs(data, cfg, lin)  # [T, P]: each render's log once, a pair's change a difference
+    if history is not None:
+        rows = logs.unbind(0)  # no index tensor (a host-to-device copy)
+        history.push([(t, rows[j]) for j, t, _ in current])
     if not pairs:
         return None
+    if past:
+        logs = torch.cat([logs, torch.stack([row for _, row in past])])
     pix = torch.arange(h * w, device=device)
     times = sorted({t for _, t, _ in ends})
     rank = {t: k for k, t in enumerate(times)}

@@ -32,7 +32,7 @@ def _streams() -> dict:
 def test_previous_gap_and_dilate():
     t = np.array([0, 10, 30, 100], np.int64)
     pix = np.array([1, 0, 1, 1])
-    assert previous_gap(t, pix).tolist() == [np.inf, np.inf, 30.0, 70.0]
+    assert previous_gap(t, pix)[0].tolist() == [np.inf, np.inf, 30.0, 70.0]
     m = np.zeros((3, 4), bool)
     m[0, 0] = True
     assert dilate(m, 1).sum() == 4 and dilate(m, 0).sum() == 1 and dilate(m, 2).sum() == 9
