@@ -1,7 +1,8 @@
-"""CPU compositing backend: numba kernels behind a torch autograd Function.
+"""CPU backend: numba kernels behind torch autograd Functions (projection and compositing).
 
-Float32 inputs use the SIMD kernels of ``_cpu_simd``; float64 inputs the scalar kernels of
-``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on).
+Compositing: float32 inputs use the SIMD kernels of ``_cpu_simd``; float64 inputs the scalar
+kernels of ``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on). The
+projection (``_cpu_projection``) computes in float64 and returns the inputs' dtype.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ import torch
 from torch import Tensor
 
 from fusiongs.render import _cpu_kernels as K
+from fusiongs.render import _cpu_projection as P
 from fusiongs.render import _cpu_simd as S
 from fusiongs.render._boxes import pixel_boxes, sorted_visible
 from fusiongs.render.projection import Projected
@@ -91,3 +93,58 @@ def composite_cpu(proj: Projected, colors: Tensor, width: int, height: int) -> t
     box = pixel_boxes(proj.means2d[cam, gid], proj.radii[cam, gid], width, height)
     return CompositeCPU.apply(proj.means2d, proj.conics, colors, proj.opacities, gid, box, offsets,
                               width, height)
+
+
+def _f64(t: Tensor) -> np.ndarray:
+    return t.detach().to(torch.float64).contiguous().numpy()
+
+
+class ProjectCPU(torch.autograd.Function):
+    """:func:`fusiongs.render.projection.project_gaussians` as one numba kernel each way.
+
+    Forward inputs: ``means [N,3]``, ``quats [N,4]``, ``scales [N,3]``, ``viewmats [C,4,4]``
+    (differentiable), then ``opacities [N]`` and ``Ks [C,3,3]`` (no gradient: they only cull and
+    size the radii), ``width``, ``height``, ``near``, ``far``, ``eps2d``.
+    Outputs: ``means2d [C,N,2]``, ``conics [C,N,3]``, ``depths [C,N]`` (the means' dtype) and
+    ``radii [C,N,2]`` int32 (not differentiable).
+    """
+
+    @staticmethod
+    def forward(ctx, means, quats, scales, viewmats, opacities, Ks, width, height, near, far, eps2d):
+        C, N = viewmats.shape[0], means.shape[0]
+        arrs = (_f64(means), _f64(quats), _f64(scales))
+        view, k = _f64(viewmats), _f64(Ks)
+        m2d, con = np.empty((C, N, 2)), np.empty((C, N, 3))
+        depth, radii = np.empty((C, N)), np.empty((C, N, 2), np.int32)
+        P.forward(*arrs, _f64(opacities), view, k, width, height, near, far, eps2d, m2d, con, depth, radii)
+        ctx.saved = (arrs, view, k, width, height, eps2d, radii, means.dtype, viewmats.dtype)
+        dt = means.dtype
+        radii_t = torch.from_numpy(radii)
+        ctx.mark_non_differentiable(radii_t)
+        return (torch.from_numpy(m2d).to(dt), torch.from_numpy(con).to(dt),
+                torch.from_numpy(depth).to(dt), radii_t)
+
+    @staticmethod
+    def backward(ctx, g_m2d, g_con, g_depth, _g_radii):
+        arrs, view, k, width, height, eps2d, radii, dt, vdt = ctx.saved
+        C, N = radii.shape[:2]
+        grads = [np.zeros(shape) if g is None else _f64(g)
+                 for g, shape in ((g_m2d, (C, N, 2)), (g_con, (C, N, 3)), (g_depth, (C, N)))]
+        g_means, g_quats, g_scales = np.empty((N, 3)), np.empty((N, 4)), np.empty((N, 3))
+        g_view = np.empty((max(1, -(-N // P.BLOCK)), C, 12))
+        P.backward(*arrs, view, k, width, height, eps2d, radii, *grads, g_means, g_quats, g_scales, g_view)
+        gv = torch.zeros(C, 4, 4, dtype=vdt)
+        gv[:, :3, :] = torch.from_numpy(g_view.sum(0).reshape(C, 3, 4))
+        return (torch.from_numpy(g_means).to(dt), torch.from_numpy(g_quats).to(dt),
+                torch.from_numpy(g_scales).to(dt), gv, None, None, None, None, None, None, None)
+
+
+def project_cpu(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, viewmats: Tensor,
+                Ks: Tensor, width: int, height: int, near_plane: float, far_plane: float,
+                eps2d: float) -> Projected:
+    """:func:`fusiongs.render.projection.project_gaussians` (same arguments, same result up to
+    rounding: computed in float64) with the numba kernels of ``_cpu_projection``; CPU tensors."""
+    m2d, con, depth, radii = ProjectCPU.apply(means, quats, scales, viewmats, opacities, Ks, width,
+                                              height, float(near_plane), float(far_plane), float(eps2d))
+    return Projected(means2d=m2d, conics=con, depths=depth, radii=radii,
+                     opacities=opacities.unsqueeze(0).expand(depth.shape))

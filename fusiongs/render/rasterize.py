@@ -129,8 +129,14 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
     if chosen == "cpu" and means.device.type != "cpu":
         raise InputError(WHERE, "backend", "'cpu' only with CPU tensors (use 'torch' or 'gsplat')",
                          str(means.device))
-    proj = project_gaussians(means, quats, scales, opacities, viewmats, Ks, width, height,
-                             near_plane, far_plane, eps2d)
+    if chosen == "cpu":  # the numba projection (same values up to rounding, float64 inside)
+        from fusiongs.render.cpu import project_cpu
+
+        proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height,
+                           near_plane, far_plane, eps2d)
+    else:
+        proj = project_gaussians(means, quats, scales, opacities, viewmats, Ks, width, height,
+                                 near_plane, far_plane, eps2d)
     if proj.means2d.requires_grad:
         proj.means2d.retain_grad()
     cols = camera_colors(means, colors, viewmats, sh_degree)
