@@ -134,6 +134,7 @@ def backward(means, quats, scales, view, K, width, height, eps2d, radii, g_m2d, 
             for k in range(12):
                 g_view[b, c, k] = 0.0
         gr = np.empty(9)  # d L / d R(q), row-major (scratch of the task, reset per Gaussian)
+        mm = np.empty(9)
         gs = np.empty(3)
         j0, j1, t0, t1 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
         gt0, gt1, gj0, gj1 = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
@@ -144,6 +145,8 @@ def backward(means, quats, scales, view, K, width, height, eps2d, radii, g_m2d, 
             gm0 = gm1 = gm2 = 0.0
             gr[:] = 0.0
             gs[:] = 0.0
+            for k in range(9):  # M = R(q) diag(s), row-major
+                mm[k] = r[k] * s[k % 3]
             for c in range(C):
                 if radii[c, n, 0] == 0 and radii[c, n, 1] == 0:
                     continue
@@ -157,13 +160,9 @@ def backward(means, quats, scales, view, K, width, height, eps2d, radii, g_m2d, 
                 for i in range(3):
                     j0[i] = fx / z * (view[c, 0, i] - u * view[c, 2, i])
                     j1[i] = fy / z * (view[c, 1, i] - v * view[c, 2, i])
-                t0[:] = 0.0
-                t1[:] = 0.0
-                for j in range(3):
-                    for i in range(3):
-                        mij = r[3 * i + j] * s[j]
-                        t0[j] += j0[i] * mij
-                        t1[j] += j1[i] * mij
+                for j in range(3):  # T_k = j_k M
+                    t0[j] = j0[0] * mm[j] + j0[1] * mm[3 + j] + j0[2] * mm[6 + j]
+                    t1[j] = j1[0] * mm[j] + j1[1] * mm[3 + j] + j1[2] * mm[6 + j]
                 c00 = t0[0] * t0[0] + t0[1] * t0[1] + t0[2] * t0[2] + eps2d
                 c11 = t1[0] * t1[0] + t1[1] * t1[1] + t1[2] * t1[2] + eps2d
                 c01 = t0[0] * t1[0] + t0[1] * t1[1] + t0[2] * t1[2]
@@ -182,9 +181,8 @@ def backward(means, quats, scales, view, K, width, height, eps2d, radii, g_m2d, 
                 gj1[:] = 0.0
                 for i in range(3):
                     for j in range(3):
-                        mij = r[3 * i + j] * s[j]
-                        gj0[i] += gt0[j] * mij
-                        gj1[i] += gt1[j] * mij
+                        gj0[i] += gt0[j] * mm[3 * i + j]
+                        gj1[i] += gt1[j] * mm[3 * i + j]
                         gmij = j0[i] * gt0[j] + j1[i] * gt1[j]
                         gr[3 * i + j] += gmij * s[j]
                         gs[j] += gmij * r[3 * i + j]
