@@ -20,12 +20,13 @@ def sorted_visible(depths: Tensor, radii: Tensor) -> tuple[Tensor, Tensor, Tenso
         sort), as gsplat's radix sort does.
     """
     C, N = depths.shape
-    flat = torch.nonzero((radii[..., 0] > 0).reshape(-1)).squeeze(1)
-    order = torch.argsort(depths.reshape(-1)[flat], stable=True)
-    flat = flat[order]
-    flat = flat[torch.argsort(flat // N, stable=True)]
+    vis = radii[..., 0] > 0
+    key = torch.where(vis, depths, torch.full_like(depths, float("inf")))
+    order = torch.argsort(key, dim=1, stable=True)  # one sort per camera row; culled entries last
+    keep = vis.gather(1, order)
+    flat = (order + torch.arange(C, device=depths.device)[:, None] * N)[keep]  # camera-major
     cam, gid = flat // N, flat % N
-    counts = torch.bincount(cam, minlength=C)
+    counts = keep.sum(1)
     offsets = torch.zeros(C + 1, dtype=torch.int64, device=depths.device)
     offsets[1:] = torch.cumsum(counts, 0)
     return cam, gid, offsets
