@@ -11,6 +11,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from fusiongs.errors import InputError
 from fusiongs.render import _cpu_kernels as K
 from fusiongs.render import _cpu_projection as P
 from fusiongs.render import _cpu_simd as S
@@ -96,7 +97,7 @@ def composite_cpu(proj: Projected, colors: Tensor, width: int, height: int) -> t
 
 
 def _f64(t: Tensor) -> np.ndarray:
-    return t.detach().to(torch.float64).contiguous().numpy()
+    return _np(t.to(torch.float64))
 
 
 class ProjectCPU(torch.autograd.Function):
@@ -144,6 +145,10 @@ def project_cpu(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor,
                 eps2d: float) -> Projected:
     """:func:`fusiongs.render.projection.project_gaussians` (same arguments, same result up to
     rounding: computed in float64) with the numba kernels of ``_cpu_projection``; CPU tensors."""
+    for name, t in (("means", means), ("quats", quats), ("scales", scales), ("opacities", opacities),
+                    ("viewmats", viewmats), ("Ks", Ks)):
+        if t.device.type != "cpu":
+            raise InputError("project_cpu", name, "a CPU tensor (the numba projection)", str(t.device))
     m2d, con, depth, radii = ProjectCPU.apply(means, quats, scales, viewmats, opacities, Ks, width,
                                               height, float(near_plane), float(far_plane), float(eps2d))
     return Projected(means2d=m2d, conics=con, depths=depth, radii=radii,

@@ -129,25 +129,18 @@ def rasterize(means: Tensor, quats: Tensor, scales: Tensor, opacities: Tensor, c
     if chosen == "cpu" and means.device.type != "cpu":
         raise InputError(WHERE, "backend", "'cpu' only with CPU tensors (use 'torch' or 'gsplat')",
                          str(means.device))
-    if chosen == "cpu":  # the numba projection (same values up to rounding, float64 inside)
-        from fusiongs.render.cpu import project_cpu
-
-        proj = project_cpu(means, quats, scales, opacities, viewmats, Ks, width, height,
-                           near_plane, far_plane, eps2d)
+    if chosen == "cpu":  # numba kernels both ways (the projection in float64, same values up to rounding)
+        from fusiongs.render.cpu import composite_cpu as composite
+        from fusiongs.render.cpu import project_cpu as project
     else:
-        proj = project_gaussians(means, quats, scales, opacities, viewmats, Ks, width, height,
-                                 near_plane, far_plane, eps2d)
+        from fusiongs.render.pairs import composite_pairs as composite
+
+        project = project_gaussians
+    proj = project(means, quats, scales, opacities, viewmats, Ks, width, height, near_plane, far_plane, eps2d)
     if proj.means2d.requires_grad:
         proj.means2d.retain_grad()
     cols = camera_colors(means, colors, viewmats, sh_degree)
-    if chosen == "cpu":
-        from fusiongs.render.cpu import composite_cpu
-
-        images, alphas = composite_cpu(proj, cols, width, height)
-    else:
-        from fusiongs.render.pairs import composite_pairs
-
-        images, alphas = composite_pairs(proj, cols, width, height)
+    images, alphas = composite(proj, cols, width, height)
     if backgrounds is not None:
         images = images + (1.0 - alphas) * backgrounds[:, None, None, :]
     meta = RenderMeta(means2d=proj.means2d, radii=proj.radii, depths=proj.depths, conics=proj.conics,

@@ -6,6 +6,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from fusiongs.errors import InputError
 from fusiongs.render.cpu import ProjectCPU, project_cpu
 from fusiongs.render.projection import project_gaussians
 from tests.render.scenes import make_scene
@@ -105,3 +106,9 @@ def test_outputs_without_gradient_count_as_zero(used):
         (g,) = torch.autograd.grad(pick(fn(m, quats, scales, opac, view, Ks, W, H, 0.01, 20.0, 0.3)), [m])
         grads.append(g)
     torch.testing.assert_close(grads[0], grads[1], rtol=1e-10, atol=1e-12)
+
+
+def test_tensors_off_the_cpu_are_refused_with_the_argument_named():
+    means, quats, scales, opac, view, Ks = _scene(n=100)
+    with pytest.raises(InputError, match="project_cpu: viewmats: expected a CPU tensor"):
+        project_cpu(means, quats, scales, opac, view.to("meta"), Ks, W, H, 0.01, 20.0, 0.3)
