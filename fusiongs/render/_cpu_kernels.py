@@ -144,10 +144,12 @@ def store_geometry_grads(gbuf, e, g_mx, g_my, g_a, g_b, g_c, g_o):  # pragma: no
 
 
 @njit(cache=True, parallel=True)
-def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, col, height, width,
+def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, op, col, height, width,
              tfin, last, v_img, v_alpha, gbuf):  # pragma: no cover - numba
-    """Back-to-front gradients per (entry, row) slot into ``gbuf[R, 6 + D]``.
+    """Back-to-front gradients per (entry, row) slot into ``gbuf[R, 6 + D]`` (zeros on entry).
 
+    Row ``task`` walks ``rows[row_off[task]:row_end[task]]`` (``row_end`` is ``row_off[1:]``, or
+    less where the caller leaves a row's slots at zero: ``fusiongs.render.cpu.row_ends``).
     Columns of gbuf: d/d mean x, mean y, conic a, b, c, opacity, colour[0:D].
     """
     D = col.shape[2]
@@ -160,7 +162,7 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, col, h
         for x in range(width):
             trow[x] = tfin[c, y, x]
         py = y + 0.5
-        for r in range(row_off[task + 1] - 1, row_off[task] - 1, -1):
+        for r in range(row_end[task] - 1, row_off[task] - 1, -1):
             k = rows[r]
             g = ids[k]
             x0, x1 = _row_range(k, c, g, y, box, mx, my, ca, cb, cc, op)

@@ -169,9 +169,10 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
 
 
 @njit(cache=True, parallel=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, col, height, width,
+def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, op, lim, col, height, width,
              tfin, last, v_img, v_alpha, gbuf):  # pragma: no cover - numba
-    """``_cpu_kernels.backward`` for float32 arrays, plus ``lim`` (sums reassociated)."""
+    """``_cpu_kernels.backward`` for float32 arrays (rows ``row_off[task]:row_end[task]``), plus
+    ``lim`` (sums reassociated)."""
     D = col.shape[2]
     for task in prange(row_off.shape[0] - 1):
         c = task // height
@@ -198,7 +199,7 @@ def backward(ids, box, row_off, rows, entry_row0, mx, my, ca, cb, cc, op, lim, c
             for d in range(D):
                 vrow[d, x] = v_img[c, y, x, d]
         py = F(y) + F(0.5)
-        for r in range(row_off[task + 1] - 1, row_off[task] - 1, -1):
+        for r in range(row_end[task] - 1, row_off[task] - 1, -1):
             k = rows[r]
             if k > row_last:
                 continue  # behind every pixel's last entry: no gradient (gbuf starts zeroed)

@@ -28,6 +28,27 @@ def _use_simd(dtype, n_entries: int) -> bool:
     return dtype == np.float32 and n_entries < 2**31
 
 
+def _idle_cameras(v_img: np.ndarray, v_alpha: np.ndarray) -> np.ndarray:
+    """``[C]`` bool: cameras whose image and alpha gradients are all exactly zero (NaN is not)."""
+    C = v_img.shape[0]
+    return ~((v_img.reshape(C, -1) != 0).any(1) | (v_alpha.reshape(C, -1) != 0).any(1))
+
+
+def row_ends(row_off: np.ndarray, idle: np.ndarray, height: int) -> np.ndarray:
+    """``[C*H]`` end of each row's entries for the backward kernels, the rows of ``idle`` cameras
+    ``[C]`` left empty (end = start).
+
+    The backward kernels walk row ``task``'s entries ``rows[row_off[task]:row_end[task]]``. A camera
+    whose images and alphas get no gradient (an output the loss does not use, as the window
+    starts of an event-only warm-up step) gives every entry a zero gradient, which is what
+    ``gbuf``'s zeros already hold: skipping its rows changes no value.
+    """
+    row_end = row_off[1:].copy()
+    for c in np.flatnonzero(idle):
+        row_end[c * height:(c + 1) * height] = row_off[c * height:(c + 1) * height]
+    return row_end
+
+
 class CompositeCPU(torch.autograd.Function):
     """Differentiable compositing on CPU (numba forward and hand-written backward).
 
@@ -72,8 +93,9 @@ class CompositeCPU(torch.autograd.Function):
         v_img_np = _np(v_img).astype(npd, copy=False)
         v_alpha_np = np.ascontiguousarray(_np(v_alpha)[..., 0].astype(npd, copy=False))
         gbuf = np.zeros((int(entry_row0[-1]), 6 + D), npd)
-        (S if simd else K).backward(ids_np, box_np, row_off, rows, entry_row0, *arrs, col, height,
-                                    width, tfin, last, v_img_np, v_alpha_np, gbuf)
+        row_end = row_ends(row_off, _idle_cameras(v_img_np, v_alpha_np), height)
+        (S if simd else K).backward(ids_np, box_np, row_off, row_end, rows, entry_row0, *arrs, col,
+                                    height, width, tfin, last, v_img_np, v_alpha_np, gbuf)
         out = np.zeros((C, N, 6 + D), npd)
         K.reduce_grads(ids_np, off_np, entry_row0, gbuf, out)
         g = torch.from_numpy(out)

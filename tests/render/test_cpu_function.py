@@ -62,3 +62,54 @@ def test_cpu_backend_keeps_float32_dtype():
     assert img.dtype == alpha.dtype == torch.float32
     img.sum().backward()
     assert means.grad.dtype == torch.float32 and means.grad.abs().sum() > 0
+
+
+def _three_camera_grads(monkeypatch, skip: bool, dtype, w_scale: tuple[float, float, float]):
+    import fusiongs.render.cpu as cpu
+
+    if not skip:
+        monkeypatch.setattr(cpu, "row_ends", lambda row_off, idle, height: row_off[1:].copy())
+    scene = make_scene(n=40, n_cams=3, seed=4, dtype=dtype)
+    leaves = [scene[k].clone().requires_grad_(True) for k in ("means", "scales", "colors")]
+    img, alpha, meta = rasterize(leaves[0], scene["quats"], leaves[1], scene["opacities"], leaves[2],
+                                 scene["viewmats"], scene["Ks"], scene["width"], scene["height"],
+                                 backend="cpu")
+    g = torch.Generator().manual_seed(9)
+    per_camera = torch.tensor(w_scale, dtype=dtype)[:, None, None, None]  # 0: the loss ignores it
+    w = torch.randn(img.shape, generator=g, dtype=dtype) * per_camera
+    wa = torch.randn(alpha.shape, generator=g, dtype=dtype) * per_camera
+    ((img * w).sum() + (alpha * wa).sum()).backward()
+    return [t.grad for t in leaves] + [meta.means2d.grad]
+
+
+def test_cameras_without_gradient_are_skipped_with_the_same_gradients(monkeypatch):
+    """A camera whose outputs the loss does not use gives zero gradients either way: skipping its
+    rows in the backward pass changes nothing, in float64 and float32, for any camera."""
+    for dtype in (torch.float64, torch.float32):
+        for scale in ((1.0, 0.0, 1.0), (0.0, 1.0, 1.0), (1.0, 1.0, 0.0), (0.0, 0.0, 1.0)):
+            with monkeypatch.context() as m:
+                ref = _three_camera_grads(m, False, dtype, scale)
+            got = _three_camera_grads(monkeypatch, True, dtype, scale)
+            for a, b in zip(got, ref):
+                assert torch.equal(a, b)
+            assert any(a.abs().sum() > 0 for a in got)
+
+
+def test_row_ends_empty_only_the_idle_cameras_rows():
+    import numpy as np
+
+    from fusiongs.render.cpu import _idle_cameras, row_ends
+
+    H = 3
+    row_off = np.array([0, 2, 5, 5, 7, 8, 12, 13, 13, 16], np.int64)  # 3 cameras x 3 rows
+    for idle in ([False, True, False], [True, False, False], [False, False, True]):
+        end = row_ends(row_off, np.array(idle), H)
+        for t in range(9):
+            n = end[t] - row_off[t]
+            assert n == (0 if idle[t // H] else row_off[t + 1] - row_off[t])
+    assert (row_ends(row_off, np.zeros(3, bool), H) == row_off[1:]).all()
+    v = np.zeros((3, 2, 2, 1))
+    v[2, 1, 1, 0] = np.nan
+    va = np.zeros((3, 2, 2))
+    va[0, 0, 0] = -1e-30
+    assert _idle_cameras(v, va).tolist() == [False, True, False]
