@@ -15,7 +15,7 @@ from fusiongs.errors import InputError
 from fusiongs.render import _cpu_kernels as K
 from fusiongs.render import _cpu_projection as P
 from fusiongs.render import _cpu_simd as S
-from fusiongs.render._boxes import pixel_boxes, sorted_visible
+from fusiongs.render._cpu_layout import depth_keys, visible_layout
 from fusiongs.render.projection import Projected
 
 
@@ -54,7 +54,9 @@ class CompositeCPU(torch.autograd.Function):
 
     Forward inputs: ``means2d [C,N,2]``, ``conics [C,N,3]``, ``colors [C,N,D]``, ``opacities [C,N]``
     (differentiable), then ``ids [P]``, ``box [P,4]``, ``cam_off [C+1]`` (int64, from
-    :func:`sorted_visible` / :func:`pixel_boxes`), ``width``, ``height``.
+    :func:`~fusiongs.render._cpu_layout.visible_layout`, or the torch reference's
+    :func:`~fusiongs.render._boxes.sorted_visible` / :func:`~fusiongs.render._boxes.pixel_boxes`),
+    ``width``, ``height``.
     Outputs: ``images [C,H,W,D]`` and ``alphas [C,H,W,1]`` (no background).
     """
 
@@ -112,8 +114,9 @@ def composite_cpu(proj: Projected, colors: Tensor, width: int, height: int) -> t
     Returns:
         ``(images [C, H, W, D], alphas [C, H, W, 1])`` without background.
     """
-    cam, gid, offsets = sorted_visible(proj.depths, proj.radii)
-    box = pixel_boxes(proj.means2d[cam, gid], proj.radii[cam, gid], width, height)
+    keys, bits = depth_keys(_np(proj.depths))
+    gid, box, offsets = (torch.from_numpy(a) for a in visible_layout(
+        keys, bits, _np(proj.radii), _np(proj.means2d), width, height))
     return CompositeCPU.apply(proj.means2d, proj.conics, colors, proj.opacities, gid, box, offsets,
                               width, height)
 
