@@ -1,4 +1,5 @@
-"""Depth order and pixel boxes shared by the compositing backends (no gradients)."""
+"""Depth order and pixel boxes of the torch backend (no gradients); the CPU backend computes the
+same in one numba pass (``_cpu_layout``), tested against these."""
 
 from __future__ import annotations
 

@@ -2,7 +2,10 @@
 
 Compositing: float32 inputs use the SIMD kernels of ``_cpu_simd``; float64 inputs the scalar
 kernels of ``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on). The
-projection (``_cpu_projection``) computes in float64 and returns the inputs' dtype.
+entries' depth order and pixel boxes come from ``_cpu_layout`` (a numba radix sort; the same as the
+torch reference in ``_boxes``), and the backward pass leaves out cameras whose outputs get no
+gradient (:func:`row_ends`). The projection (``_cpu_projection``) computes in float64 and returns
+the inputs' dtype.
 """
 
 from __future__ import annotations
