@@ -12,7 +12,10 @@ and every pixel's signed count is compared between the two streams:
 - *missed*: a wrong one that a censoring rule does not mark as a lower bound. Rules: the
   default (a fast event, closer than 2 dead times to its pixel's previous one, in the window,
   ``events.censor 2``), the same with each fast event's predecessor marking too, and with the
-  fast events' neighbours within 1 or 2 pixels (``events.censor_radius``);
+  fast events' neighbours within 1 or 2 pixels (``events.censor_radius``); and, as the bound a
+  model of the losses could reach, every window that meets a render step in which the true log
+  intensity changes by more than one threshold per dead time (the simulator's truth: no run on a
+  real sensor can know it);
 - *censored*: the share of active pixel-windows a rule marks (information given up);
 - the count corrections a stream alone allows, on the uncensored windows: the non-paralysable
   dead-time law ``n / (1 - n r / T)`` and half of each event's bound ``r / (dt - r)`` (at most 3)
@@ -65,10 +68,23 @@ def pixel_streams(scene: Path) -> dict:
         drift, phase = dvs.leak_drift(cfg.dvs, th_on, np.random.default_rng(seeds[6]))
         leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
     out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6,
-           "duration_s": float(cfg.duration)}
+           "duration_s": float(cfg.duration), "times": times,
+           "true_fast": true_fast_steps(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s)}
     for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):
         out[name] = dvs.dvs_events(logs, times, th_on * scale, th_off * scale, r, **leak)
     return out
+
+
+def true_fast_steps(logs: np.ndarray, times: np.ndarray, th_on: np.ndarray, th_off: np.ndarray,
+                    dead_s: float) -> np.ndarray:
+    """``[K, P]`` int32 cumulative count of render steps (``logs [K, P]`` at ``times [K]``) in which
+    the true log intensity of a pixel changes by more than one of its thresholds per dead time:
+    the only places where the pixel model can lose a crossing (row ``k`` counts steps before
+    ``times[k]``)."""
+    d = np.diff(logs, axis=0)
+    per_dead = np.abs(d) / np.where(d > 0, th_on, th_off) * (dead_s / (times[1] - times[0]))
+    zero = np.zeros((1, logs.shape[1]), np.int32)
+    return np.concatenate([zero, np.cumsum(per_dead > 1.0, axis=0, dtype=np.int32)])
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -103,7 +119,8 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
     rng = np.random.default_rng(seed)
     span = s["duration_s"]
     longest = min(4.0 / (len(dt) / n_pix / span), span)  # s: an average pixel's 4 events
-    rules = ("default", "with predecessors", "radius 1", "radius 2")
+    rules = ("default", "with predecessors", "radius 1", "radius 2", "the true rate (oracle)")
+    times_us, true_fast = s["times"] * 1e6, s["true_fast"]
     acc = {k: np.zeros(2) for k in rules}
     tot = np.zeros(2)
     corr = np.zeros(7)
@@ -123,6 +140,9 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
                  "with predecessors": own | (np.bincount(di[md & pred], minlength=n_pix) > 0)}
         for rad in (1, 2):
             marks[f"radius {rad}"] = dilate(own.reshape(h, w), rad).reshape(-1)
+        k0 = max(int(np.searchsorted(times_us, ta, side="right")) - 1, 0)  # the steps the window meets
+        k1 = min(int(np.searchsorted(times_us, tb, side="left")), len(true_fast) - 1)
+        marks["the true rate (oracle)"] = true_fast[k1] - true_fast[k0] > 0
         for k in rules:
             acc[k] += [(wrong & ~marks[k]).sum(), (marks[k] & active).sum()]
         sel = ~own & (n_any > 0)

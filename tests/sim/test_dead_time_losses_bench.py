@@ -5,7 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from benchmarks.bench_dead_time_losses import dilate, lost_crossings, previous_gap, window_table
+from benchmarks.bench_dead_time_losses import (
+    dilate,
+    lost_crossings,
+    previous_gap,
+    true_fast_steps,
+    window_table,
+)
 
 R = 150.0  # dead time, µs
 
@@ -25,8 +31,17 @@ def _streams() -> dict:
         t, i = np.asarray(t, np.int64)[order], np.asarray(i, np.int64)[order]
         return t, i, np.ones(len(t), np.int8)
 
+    # the true log intensity at 100 µs steps (θ = 0.2): pixel 0 rises one θ a step over 0-500 µs,
+    # pixel 1 two θ in its first step and one θ in 5000-5100 µs, pixel 2 0.625 θ a step (one θ per
+    # 160 µs, slower than one per dead time: 0.94 θ per 150 µs)
+    times = np.arange(61) * 1e-4
+    k = np.arange(61)
+    logs = np.stack([0.2 * np.minimum(k, 5), 0.4 * (k >= 1) + 0.2 * (k >= 51),
+                     0.125 * np.minimum(k, 4)], axis=1)
+    th = np.full(3, 0.2)
     return {"width": 3, "height": 1, "dead_us": R, "duration_s": 0.006, "dead": stream(dead_t, dead_i),
-            "clean": stream(clean_t, clean_i)}
+            "clean": stream(clean_t, clean_i), "times": times,
+            "true_fast": true_fast_steps(logs, times, th, th, R * 1e-6)}
 
 
 def test_previous_gap_and_dilate():
@@ -56,3 +71,16 @@ def test_window_table_finds_the_unmarked_short_count():
     assert missed > 0
     assert tab["rules"]["radius 1"][0] < missed and tab["rules"]["radius 1"][1] > censored
     assert tab["corrections"]["none"][0] > 0  # uncensored counts are short on the mean
+
+
+def test_true_fast_steps_and_the_oracle_rule_marks_every_loss():
+    s = _streams()
+    fast = np.diff(s["true_fast"], axis=0)  # [steps, pixels] 0/1
+    assert fast[:, 0].nonzero()[0].tolist() == [0, 1, 2, 3, 4]
+    assert fast[:, 1].nonzero()[0].tolist() == [0, 50]
+    assert fast[:, 2].sum() == 0  # 0.94 thresholds per dead time: no loss possible
+    tab = window_table(s, 200, 0)
+    missed, censored = tab["rules"]["the true rate (oracle)"]
+    assert missed == 0  # every window with a lost crossing meets a fast step of its pixel
+    assert 0 < censored < 1  # pixel 2's windows are never censored
+    assert tab["rules"]["default"][0] > 0  # while the default misses pixel 1's loss
