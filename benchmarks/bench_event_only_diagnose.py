@@ -260,6 +260,7 @@ def true_fast_events(scene: Path, events) -> np.ndarray:
     simulator's losses happen only there (RESULTS.md session 33: every wrong count of tuning
     seeds 5 and 8 lies in a window holding such a step), so these marks are what a perfect model of
     the losses would censor; a real sensor's run cannot know them."""
+    from benchmarks.bench_dead_time_losses import true_fast_steps
     from fusiongs.sim import dvs
 
     cfg = sim_config(scene)
@@ -268,12 +269,11 @@ def true_fast_events(scene: Path, events) -> np.ndarray:
     th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1],
                                          np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(7)[1]),
                                          width=cfg.width)
-    d = np.diff(logs, axis=0)  # [K - 1, P] per render step
-    per_dead = np.abs(d) / (np.where(d > 0, th_on, th_off) * scale) * (
-        cfg.dvs.refractory_s / (times[1] - times[0]))
-    fast = per_dead > 1.0
-    fast[1:] |= fast[:-1].copy()
-    fast[:-1] |= per_dead[1:] > 1.0
+    steps = np.diff(true_fast_steps(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s),
+                    axis=0) > 0  # [K - 1, P] per render step
+    fast = steps.copy()
+    fast[1:] |= steps[:-1]
+    fast[:-1] |= steps[1:]
     step = np.clip(np.searchsorted(times, events.t * 1e-6, side="right") - 1, 0, len(fast) - 1)
     return fast[step, events.y.astype(np.int64) * events.width + events.x]
 
