@@ -400,7 +400,7 @@ def main(argv=None) -> int:
     from fusiongs.train.pipeline import run_deblur
 
     if args.sensor:
-        if args.oracle or args.true_geometry or args.true_theta:
+        if args.oracle or args.true_geometry or args.true_theta or args.censor_oracle:
             p.error("--sensor: the re-simulated scene has no gt/sim.json; use it without the truth options")
         try:
             args.scene = resimulate(args.scene, args.out.parent / f"{args.out.name}_scene", args.sensor)

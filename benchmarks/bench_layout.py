@@ -46,6 +46,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=18000)
     ap.add_argument("--reps", type=int, default=50)
     args = ap.parse_args(argv)
+    for name in ("n", "reps"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name}: expected an integer >= 1, got {getattr(args, name)}")
     forms = {"numba (visible_layout)": numba_layout,
              "torch (sorted_visible + pixel_boxes, reference)": torch_layout}
     print(f"{args.n} Gaussians, {WIDTH}x{HEIGHT}, float32, {torch.get_num_threads()} torch thread(s)")
