@@ -1,0 +1,84 @@
+"""benchmarks/bench_calibrate_resim.py: the recording's own sensor parameters and the re-simulated
+events, on streams whose rates and crossings are known."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from benchmarks.bench_calibrate_resim import events_with, isolated_rates, own_log
+from fusiongs.events.stream import EventStream
+from fusiongs.sim.dvs import DVSParams
+from fusiongs.sim.simulate import SimConfig
+
+W, H, T = 60, 40, 4.0  # sensor and span (s)
+
+
+def _poisson(rate: float, polarity: int | None, rng: np.random.Generator):
+    n = rng.poisson(rate * W * H * T)
+    t = rng.integers(0, int(T * 1e6), n)
+    p = rng.choice([-1, 1], n) if polarity is None else np.full(n, polarity)
+    return t, rng.integers(0, W, n), rng.integers(0, H, n), p
+
+
+def _stream(parts) -> EventStream:
+    t, x, y, p = (np.concatenate(v) for v in zip(*parts))
+    return EventStream.create(t, x, y, p, W, H, sort=True)
+
+
+def test_isolated_rates_recover_background_and_leak_beside_an_edge():
+    rng = np.random.default_rng(3)
+    ba, leak = 2.0, 0.5
+    # a bar sweeping across the sensor eight times: each column fires ON on all rows, 2 ms apart
+    sweep_t = (np.arange(8)[:, None] * 0.5 + np.arange(W)[None] * 2e-3).ravel()
+    xs = np.tile(np.arange(W), 8)
+    edge = (np.repeat((sweep_t * 1e6).astype(np.int64), H), np.repeat(xs, H),
+            np.tile(np.arange(H), xs.size), np.ones(xs.size * H, np.int64))
+    ev = _stream([_poisson(ba, None, rng), _poisson(leak, 1, rng), edge])
+    assert len(ev) > 3 * (ba + leak) * W * H  # the edge's events outnumber the noise
+    on, off = isolated_rates(ev, np.zeros(W * H, bool), T)
+    assert 2 * off == pytest.approx(ba, rel=0.15)
+    assert on - off == pytest.approx(leak, abs=0.15)
+
+
+def test_isolated_rates_leave_out_hot_pixels():
+    rng = np.random.default_rng(4)
+    hot_pix = rng.choice(W * H, 48, replace=False)  # 2 % of the pixels fire ON at 30 Hz
+    n = rng.poisson(30 * T, hot_pix.size)
+    idx = np.repeat(hot_pix, n)
+    hot_t = rng.integers(0, int(T * 1e6), idx.size)
+    hot = (hot_t, idx % W, idx // W, np.ones(idx.size, np.int64))
+    ev = _stream([_poisson(1.0, None, rng), hot])
+    mask = np.zeros(W * H, bool)
+    mask[hot_pix] = True
+    on, off = isolated_rates(ev, mask, T)
+    assert on - off == pytest.approx(0.0, abs=0.1)
+    assert 2 * off == pytest.approx(1.0, rel=0.15)
+    on_all, off_all = isolated_rates(ev, np.zeros(W * H, bool), T)
+    assert on_all - off_all > on - off + 0.1  # kept in, the hot pixels read as leak
+
+
+def test_events_with_uses_the_given_thresholds_and_dead_time():
+    cfg = SimConfig(width=2, height=1, duration=0.01, dvs_rate_hz=1000.0, seed=1)
+    quiet = dataclasses.replace(DVSParams(), theta_sigma=0.0, refractory_s=0.0, ba_rate_hz=0.0,
+                                hot_pixel_fraction=0.0, leak_rate_hz=0.0)
+    k = np.arange(11)[:, None]
+    logs = np.concatenate([0.1 * k, -0.105 * k], 1).astype(np.float32)  # +1.0, -1.05 in 10 ms
+    ev = events_with(cfg, quiet, logs, (0.25, 0.2), 0.0, seed=0)
+    on = ev.p > 0
+    assert (ev.x[on] == 0).all() and (ev.x[~on] == 1).all()
+    assert int(on.sum()) == 4 and int((~on).sum()) == 5  # floor(1.0 / θ) crossings each
+    slow = events_with(cfg, dataclasses.replace(quiet, refractory_s=4e-3), logs, (0.25, 0.2), 0.0, seed=0)
+    assert len(slow) < len(ev)  # the dead time drops crossings
+
+
+def test_own_log_takes_each_pixels_channel():
+    img = np.zeros((2, 2, 3), np.float32)
+    img[..., 0], img[..., 1], img[..., 2] = 0.5, 0.25, 0.125
+    cfa = np.array([[0, 1], [1, 2]])  # RGGB
+    out = own_log(img, cfa, 0.0)
+    assert np.allclose(np.exp(out), [0.5, 0.25, 0.25, 0.125])
+    grey = own_log(img, None, 0.0)
+    assert np.allclose(np.exp(grey), 0.299 * 0.5 + 0.587 * 0.25 + 0.114 * 0.125)
