@@ -18,16 +18,18 @@ The video (``--video``):
   Gaussians, refined trajectory and exposure gains).
 
 For ``flow`` and ``model`` the blurry frames are made again too: the video's mean over each
-exposure, encoded as the scene's frames. The sensor's other parameters (``--sensor``): ``true``
-(the simulator's; a diagnosis only) or ``est``, from the recording alone (:func:`estimated_sensor`:
-the estimator's dead time and threshold spread, the spatial hot pixels and their rate, background
-activity and leak from isolated events, :func:`isolated_rates`). ``--spread N`` instead reports the
-estimator's own spread: N draws of the scene's sensor at its true thresholds (``sim`` video).
+exposure, encoded as the scene's frames (``--real-frames`` keeps the scene's own instead, to tell
+whether the events or the frames of a video miss the bias). The sensor's other parameters
+(``--sensor``): ``true`` (the simulator's; a diagnosis only) or ``est``, from the recording
+alone (:func:`estimated_sensor`: the estimator's dead time and threshold spread, the spatial hot
+pixels and their rate, background activity and leak from isolated events,
+:func:`isolated_rates`). ``--spread N`` instead reports the estimator's own spread: N draws of
+the scene's sensor at its true thresholds (``sim`` video).
 
 Simulated scenes only (the truth is read to score), tuning seeds for any choice.
 
     PYTHONPATH=. python benchmarks/bench_calibrate_resim.py SCENE [--video sim|flow|model]
-        [--run RUN] [--sensor true|est] [--iters 2] [--reps 1] [--spread N] [--json FILE]
+        [--run RUN] [--sensor true|est] [--real-frames] [--iters 2] [--reps 1] [--spread N] [--json FILE]
 """
 
 from __future__ import annotations
@@ -65,7 +67,7 @@ def sim_config(scene: Path) -> tuple[SimConfig, dict]:
     """The scene's :class:`SimConfig` and ``gt/sim.json`` facts (simulated scenes only)."""
     facts = read_sim_facts(scene)
     if facts is None or "config" not in facts:
-        raise SystemExit(f"{scene}: no gt/sim.json (a simulated scene is needed for the truth)")
+        raise ValueError(f"{scene}: no gt/sim.json with its config (a simulated scene is needed)")
     cfg = dict(facts["config"])
     cfg["dvs"] = DVSParams(**cfg["dvs"])
     return SimConfig(**cfg), facts
@@ -261,6 +263,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--video", choices=("sim", "flow", "model"), default="sim")
     ap.add_argument("--run", type=Path, default=None, help="finished deblur run (--video model)")
     ap.add_argument("--sensor", choices=("true", "est"), default="true")
+    ap.add_argument("--real-frames", action="store_true",
+                    help="pair the video's events with the scene's own frames (which half is off)")
     ap.add_argument("--iters", type=int, default=2)
     ap.add_argument("--reps", type=int, default=1)
     ap.add_argument("--spread", type=int, default=0, help="N draws at the true thresholds instead")
@@ -270,7 +274,10 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--video model needs --run (a finished fusiongs deblur run of the scene)")
     if min(args.iters, args.reps) < 1 or args.spread < 0:
         ap.error("--iters and --reps must be at least 1, --spread at least 0")
-    cfg, facts = sim_config(args.scene)
+    try:
+        cfg, facts = sim_config(args.scene)
+    except ValueError as exc:
+        ap.error(str(exc))
     true = np.array([facts["theta_on"], facts["theta_off"]], np.float64)
     t0 = time.perf_counter()
     scene = load_scene(args.scene)
@@ -304,6 +311,9 @@ def main(argv: list[str] | None = None) -> int:
             logs, frames = flow_video(scene, est, cfg)
         else:
             logs, frames = model_video(scene, args.run, cfg)
+        if args.real_frames:
+            frames = scene.frames
+            row["frames"] = "the scene's own"
         row["first_err"] = (first / true[:, None] - 1).tolist()
         row["iters"] = []
         cur = first
