@@ -49,6 +49,9 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from benchmarks.bench_event_only_diagnose import sim_config, true_logs  # noqa: E402
+from fusiongs.errors import InputError  # noqa: E402
 from fusiongs.eval.calibrate import estimate_thresholds  # noqa: E402
 from fusiongs.eval.edi import edi_scene  # noqa: E402
 from fusiongs.eval.truth import read_sim_facts  # noqa: E402
@@ -60,17 +63,16 @@ from fusiongs.io import load_scene  # noqa: E402
 from fusiongs.sim import dvs  # noqa: E402
 from fusiongs.sim.dvs import REC601, DVSParams  # noqa: E402
 from fusiongs.sim.exposure import encode_linear16, encode_srgb8  # noqa: E402
-from fusiongs.sim.simulate import SimConfig, _pixel_events, scene_renderer  # noqa: E402
+from fusiongs.sim.simulate import SimConfig, _pixel_events, noise_events, sensor_draws  # noqa: E402
 
 
-def sim_config(scene: Path) -> tuple[SimConfig, dict]:
-    """The scene's :class:`SimConfig` and ``gt/sim.json`` facts (simulated scenes only)."""
+def scene_truth(scene: Path) -> tuple[SimConfig, dict]:
+    """The scene's :class:`SimConfig` and ``gt/sim.json`` facts; ``ValueError`` (one line) for a
+    scene without them (simulated scenes only)."""
     facts = read_sim_facts(scene)
     if facts is None or "config" not in facts:
         raise ValueError(f"{scene}: no gt/sim.json with its config (a simulated scene is needed)")
-    cfg = dict(facts["config"])
-    cfg["dvs"] = DVSParams(**cfg["dvs"])
-    return SimConfig(**cfg), facts
+    return sim_config(scene), facts
 
 
 def dense_times(cfg: SimConfig) -> np.ndarray:
@@ -83,18 +85,6 @@ def own_log(img: np.ndarray, cfa_idx: np.ndarray | None, eps: float) -> np.ndarr
     inten = img @ np.asarray(REC601, np.float32) if cfa_idx is None else np.take_along_axis(
         img, cfa_idx[..., None], -1)[..., 0]
     return np.log(np.maximum(inten, 0) + eps).reshape(-1)
-
-
-def sim_video(scene: Path, cfg: SimConfig) -> np.ndarray:
-    """``[K+1, H*W]`` float32 sensor logs of the simulator's own renders (kept in
-    ``SCENE/gt/dense_logs.npy`` after the first call)."""
-    cache = scene / "gt" / "dense_logs.npy"
-    if cache.is_file():
-        return np.load(cache)
-    r = scene_renderer(cfg)
-    logs = np.stack([dvs.sensor_log(r.render(float(t)), cfg.cfa, cfg.dvs.eps) for t in dense_times(cfg)])
-    np.save(cache, logs)
-    return logs
 
 
 def video_from(image_at, frames: FrameSet, times: np.ndarray, cfa: str | None, eps: float,
@@ -239,16 +229,9 @@ def events_with(cfg: SimConfig, params: DVSParams, logs: np.ndarray, theta: tupl
     ``params``; ``seed`` draws the pixels' thresholds, noise, hot pixels and leak."""
     p = dataclasses.replace(params, theta_on=theta[0], theta_off=theta[1], theta_sigma=sigma)
     seeds = np.random.SeedSequence([cfg.seed, seed]).spawn(7)
-    rng_theta, rng_ba, rng_hot, rng_leak = (np.random.default_rng(seeds[i]) for i in (1, 2, 5, 6))
-    th_on, th_off = dvs.pixel_thresholds(p, logs.shape[1], rng_theta, width=cfg.width)
-    drift = phase = None
-    if p.leak_rate_hz > 0:
-        drift, phase = dvs.leak_drift(p, th_on, rng_leak)
+    th_on, th_off, drift, phase = sensor_draws(p, logs.shape[1], cfg.width, seeds)
     ev = _pixel_events(logs, dense_times(cfg), th_on, th_off, p.refractory_s, drift, phase, 1.0)
-    noise = dvs.background_activity(p.ba_rate_hz, logs.shape[1], 0.0, cfg.duration, rng_ba)
-    hot = dvs.hot_pixel_events(p.hot_pixel_fraction, p.hot_pixel_rate_hz, logs.shape[1], 0.0,
-                               cfg.duration, rng_hot)
-    t_us, pix, pol = dvs.merge_sorted(ev, noise, hot)
+    t_us, pix, pol = dvs.merge_sorted(ev, *noise_events(p, logs.shape[1], cfg.duration, seeds))
     return EventStream.create(t_us, pix % cfg.width, pix // cfg.width, pol, cfg.width, cfg.height,
                               cfg.cfa, source="re-simulation")
 
@@ -272,10 +255,12 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.video == "model" and args.run is None:
         ap.error("--video model needs --run (a finished fusiongs deblur run of the scene)")
+    if args.video == "model" and not (args.run / "checkpoint.pt").is_file():
+        ap.error(f"{args.run / 'checkpoint.pt'}: not found (--run: a finished fusiongs deblur run)")
     if min(args.iters, args.reps) < 1 or args.spread < 0:
         ap.error("--iters and --reps must be at least 1, --spread at least 0")
     try:
-        cfg, facts = sim_config(args.scene)
+        cfg, facts = scene_truth(args.scene)
     except ValueError as exc:
         ap.error(str(exc))
     true = np.array([facts["theta_on"], facts["theta_off"]], np.float64)
@@ -286,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
            "sensor": args.sensor, "events": len(scene.events)}
     head = f"{row['scene']} ({row['preset']} {row['cfa']}, dead time {row['refractory_ms']:.2f} ms)"
     if args.spread:
-        logs = sim_video(args.scene, cfg)
+        logs = true_logs(args.scene)[1]
         errs = []
         for r in range(args.spread):
             ev = events_with(cfg, cfg.dvs, logs, (float(true[0]), float(true[1])),
@@ -306,11 +291,14 @@ def main(argv: list[str] | None = None) -> int:
             row["sensor_est"] = dataclasses.asdict(params) | {"relative_spread": rel_sigma}
         frames = scene.frames
         if args.video == "sim":
-            logs = sim_video(args.scene, cfg)
+            logs = true_logs(args.scene)[1]
         elif args.video == "flow":
             logs, frames = flow_video(scene, est, cfg)
         else:
-            logs, frames = model_video(scene, args.run, cfg)
+            try:
+                logs, frames = model_video(scene, args.run, cfg)
+            except InputError as exc:  # a checkpoint that does not load
+                ap.error(str(exc))
         if args.real_frames:
             frames = scene.frames
             row["frames"] = "the scene's own"

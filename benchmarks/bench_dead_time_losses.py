@@ -52,20 +52,18 @@ def pixel_streams(scene: Path) -> dict:
     ``{"dead": (t, pixel, p), "clean": (t, pixel, p), "width", "height", "dead_us", "duration_s"}``
     (t in µs from the recording's start)."""
     from fusiongs.sim import dvs
-    from fusiongs.sim.simulate import scene_renderer
+    from fusiongs.sim.simulate import scene_renderer, sensor_draws
 
     cfg = sim_config(scene)
     scale = float(json.loads((scene / "gt" / "sim.json").read_text())["threshold_scale"])
     render = scene_renderer(cfg).render
-    seeds = np.random.SeedSequence(cfg.seed).spawn(7)  # the simulator's streams 1 (θ) and 6 (leak)
+    seeds = np.random.SeedSequence(cfg.seed).spawn(7)  # the simulator's streams
     times = np.linspace(0.0, cfg.duration, int(round(cfg.duration * cfg.dvs_rate_hz)) + 1)
     logs = np.stack([dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps) for t in times])
     logs = logs.astype(np.float32)
-    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1], np.random.default_rng(seeds[1]),
-                                         width=cfg.width)
+    th_on, th_off, drift, phase = sensor_draws(cfg.dvs, logs.shape[1], cfg.width, seeds)
     leak = {}
-    if cfg.dvs.leak_rate_hz > 0:
-        drift, phase = dvs.leak_drift(cfg.dvs, th_on, np.random.default_rng(seeds[6]))
+    if drift is not None:
         leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
     out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6,
            "duration_s": float(cfg.duration), "times": times,

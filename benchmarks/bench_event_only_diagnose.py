@@ -261,14 +261,13 @@ def true_fast_events(scene: Path, events) -> np.ndarray:
     seeds 5 and 8 lies in a window holding such a step), so these marks are what a perfect model of
     the losses would censor; a real sensor's run cannot know them."""
     from benchmarks.bench_dead_time_losses import true_fast_steps
-    from fusiongs.sim import dvs
+    from fusiongs.sim.simulate import sensor_draws
 
     cfg = sim_config(scene)
     scale = float(json.loads((scene / "gt" / "sim.json").read_text())["threshold_scale"])
     times, logs = true_logs(scene)
-    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1],
-                                         np.random.default_rng(np.random.SeedSequence(cfg.seed).spawn(7)[1]),
-                                         width=cfg.width)
+    th_on, th_off, _, _ = sensor_draws(cfg.dvs, logs.shape[1], cfg.width,
+                                       np.random.SeedSequence(cfg.seed).spawn(7))
     steps = np.diff(true_fast_steps(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s),
                     axis=0) > 0  # [K - 1, P] per render step
     fast = steps.copy()

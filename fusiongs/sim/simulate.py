@@ -190,8 +190,7 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     # Children 0 and 4 drive shake and jitter (scene_renderer); 5 and 6 were added for hot pixels
     # and leak, so the first five streams, and with them every default scene, are unchanged.
     seeds = np.random.SeedSequence(cfg.seed).spawn(7)
-    rng_theta, rng_ba, rng_noise, rng_hot, rng_leak = (np.random.default_rng(seeds[i])
-                                                        for i in (1, 2, 3, 5, 6))
+    rng_noise = np.random.default_rng(seeds[3])
 
     # Events: dense renders -> sensor log intensity -> DVS model.
     n_steps = int(round(cfg.duration * cfg.dvs_rate_hz))
@@ -200,13 +199,10 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
     for k, t in enumerate(times):
         logs[k] = dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps)
     t_events = time.perf_counter()
-    th_on, th_off = dvs.pixel_thresholds(cfg.dvs, logs.shape[1], rng_theta, width=cfg.width)
+    th_on, th_off, drift, phase = sensor_draws(cfg.dvs, logs.shape[1], cfg.width, seeds)
     scale = 1.0
     if cfg.events_target is not None:
         scale = tune_threshold_scale(logs, th_on, th_off, cfg.events_target)
-    drift = phase = None
-    if cfg.dvs.leak_rate_hz > 0:
-        drift, phase = dvs.leak_drift(cfg.dvs, th_on, rng_leak)
 
     def events_at(s: float):
         return _pixel_events(logs, times, th_on * s, th_off * s, cfg.dvs.refractory_s, drift, phase, s)
@@ -219,9 +215,7 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
             break
         scale = float(np.clip(scale * n / cfg.events_target, 0.05, 20.0))
         ev = events_at(scale)
-    noise = dvs.background_activity(cfg.dvs.ba_rate_hz, logs.shape[1], 0.0, cfg.duration, rng_ba)
-    hot = dvs.hot_pixel_events(cfg.dvs.hot_pixel_fraction, cfg.dvs.hot_pixel_rate_hz, logs.shape[1],
-                               0.0, cfg.duration, rng_hot)
+    noise, hot = noise_events(cfg.dvs, logs.shape[1], cfg.duration, seeds)
     t_us, pix, pol = dvs.merge_sorted(ev, noise, hot)
     n_pixels = logs.shape[1]
     logs = None  # free the dense log intensities before the frames
@@ -268,6 +262,28 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
         "config": {k: v for k, v in asdict(cfg).items()},
     }
     return SimResult(scene, gt, stats)
+
+
+def sensor_draws(params: dvs.DVSParams, n_pixels: int, width: int, seeds: list[np.random.SeedSequence]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """The sensor's per-pixel draws as :func:`run_simulation` makes them: ``(theta_on [P],
+    theta_off [P], drift [P] | None, phase [P] | None)`` from the spawned ``seeds`` (children 1:
+    thresholds, 6: leak; ``drift`` and ``phase`` of :func:`dvs.leak_drift`, None without leak)."""
+    th_on, th_off = dvs.pixel_thresholds(params, n_pixels, np.random.default_rng(seeds[1]), width=width)
+    drift = phase = None
+    if params.leak_rate_hz > 0:
+        drift, phase = dvs.leak_drift(params, th_on, np.random.default_rng(seeds[6]))
+    return th_on, th_off, drift, phase
+
+
+def noise_events(params: dvs.DVSParams, n_pixels: int, duration: float, seeds: list[np.random.SeedSequence]):
+    """``(background activity, hot-pixel events)``, each ``(t µs, pixel, p)`` over ``[0, duration]``
+    s, as :func:`run_simulation` draws them (seed children 2 and 5)."""
+    noise = dvs.background_activity(params.ba_rate_hz, n_pixels, 0.0, duration,
+                                    np.random.default_rng(seeds[2]))
+    hot = dvs.hot_pixel_events(params.hot_pixel_fraction, params.hot_pixel_rate_hz, n_pixels, 0.0,
+                               duration, np.random.default_rng(seeds[5]))
+    return noise, hot
 
 
 def _pixel_events(logs, times, th_on, th_off, refractory_s, drift, phase, scale):
