@@ -17,6 +17,13 @@ The video (``--video``):
 - ``model``: the renders of a finished ``fusiongs deblur`` run of the scene (``--run``: its
   Gaussians, refined trajectory and exposure gains).
 
+Two diagnosis variants of ``sim`` (frames made again from the video, as below): ``--blur SIGMA``
+blurs every image of the simulator's video by a Gaussian of ``SIGMA`` px before the sensor sees
+it (how sharp must a twin be?), and ``--trajectory run`` renders the simulator's world along the
+refined trajectory of ``--run`` instead of the true one (is the trajectory what a twin misses?).
+Every row prints the video's *fast steps*, the changes of log intensity above 0.3 within one
+1-ms render step, beside the scene's own (the simulator's video) where it differs.
+
 For ``flow`` and ``model`` the blurry frames are made again too: the video's mean over each
 exposure, encoded as the scene's frames (``--real-frames`` keeps the scene's own instead, to tell
 whether the events or the frames of a video miss the bias). The sensor's other parameters
@@ -29,7 +36,8 @@ the scene's sensor at its true thresholds (``sim`` video).
 Simulated scenes only (the truth is read to score), tuning seeds for any choice.
 
     PYTHONPATH=. python benchmarks/bench_calibrate_resim.py SCENE [--video sim|flow|model]
-        [--run RUN] [--sensor true|est] [--real-frames] [--iters 2] [--reps 1] [--spread N] [--json FILE]
+        [--run RUN] [--sensor true|est] [--real-frames] [--blur SIGMA] [--trajectory true|run]
+        [--iters 2] [--reps 1] [--spread N] [--json FILE]
 """
 
 from __future__ import annotations
@@ -63,7 +71,13 @@ from fusiongs.io import load_scene  # noqa: E402
 from fusiongs.sim import dvs  # noqa: E402
 from fusiongs.sim.dvs import REC601, DVSParams  # noqa: E402
 from fusiongs.sim.exposure import encode_linear16, encode_srgb8  # noqa: E402
-from fusiongs.sim.simulate import SimConfig, _pixel_events, noise_events, sensor_draws  # noqa: E402
+from fusiongs.sim.simulate import (  # noqa: E402
+    SimConfig,
+    _pixel_events,
+    noise_events,
+    scene_renderer,
+    sensor_draws,
+)
 
 
 def scene_truth(scene: Path) -> tuple[SimConfig, dict]:
@@ -176,6 +190,36 @@ def model_video(scene, run: Path, cfg: SimConfig) -> tuple[np.ndarray, FrameSet]
                       gains / g_mid)
 
 
+def sim_video(scene, cfg: SimConfig, blur: float = 0.0, run: Path | None = None
+              ) -> tuple[np.ndarray, FrameSet]:
+    """``sim`` video variants: the simulator's world along its true trajectory (or the refined one
+    of the deblur run ``run``), every image blurred by a Gaussian of ``blur`` px (0: none)."""
+    sr = scene_renderer(cfg)
+    if run is not None:
+        from fusiongs.train.restore import restore_state
+
+        traj = restore_state(run / "checkpoint.pt")[0].trajectory
+
+        def pose(t: float) -> np.ndarray:
+            with torch.no_grad():
+                return traj.c2w(torch.tensor([t], dtype=torch.float64))[0].double().cpu().numpy()
+    else:
+        def pose(t: float) -> np.ndarray:
+            return sr.trajectory.c2w(np.array([t]))[0]
+
+    def image_at(_k: int, t: float) -> np.ndarray:
+        img = np.ascontiguousarray(sr.caster.render(pose(t)).cpu().numpy(), np.float32)
+        return cv2.GaussianBlur(img, (0, 0), blur, borderType=cv2.BORDER_REPLICATE) if blur > 0 else img
+
+    return video_from(image_at, scene.frames, dense_times(cfg), cfg.cfa, cfg.dvs.eps, (cfg.height, cfg.width))
+
+
+def fast_steps(logs: np.ndarray, step: float = 0.3) -> int:
+    """How many changes of log intensity above ``step`` one render step of ``logs [K+1, P]`` holds
+    (the fast, large changes where the dead time loses crossings)."""
+    return int(sum(int((np.abs(logs[k + 1] - logs[k]) > step).sum()) for k in range(len(logs) - 1)))
+
+
 def isolated_rates(events: EventStream, hot: np.ndarray, duration: float, bin_s: float = 0.01
                    ) -> tuple[float, float]:
     """ON and OFF rates (Hz per pixel) of isolated events: those in (``bin_s`` x 1 px) cells whose
@@ -248,14 +292,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sensor", choices=("true", "est"), default="true")
     ap.add_argument("--real-frames", action="store_true",
                     help="pair the video's events with the scene's own frames (which half is off)")
+    ap.add_argument("--blur", type=float, default=0.0,
+                    help="sim video: Gaussian blur (px) of every image, frames made again")
+    ap.add_argument("--trajectory", choices=("true", "run"), default="true",
+                    help="sim video: the simulator's world along the --run's refined trajectory")
     ap.add_argument("--iters", type=int, default=2)
     ap.add_argument("--reps", type=int, default=1)
     ap.add_argument("--spread", type=int, default=0, help="N draws at the true thresholds instead")
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
-    if args.video == "model" and args.run is None:
-        ap.error("--video model needs --run (a finished fusiongs deblur run of the scene)")
-    if args.video == "model" and not (args.run / "checkpoint.pt").is_file():
+    needs_run = args.video == "model" or args.trajectory == "run"
+    if needs_run and args.run is None:
+        ap.error("--video model and --trajectory run need --run (a finished fusiongs deblur run of "
+                 "the scene)")
+    if (args.blur or args.trajectory == "run") and args.video != "sim":
+        ap.error("--blur and --trajectory run are variants of --video sim")
+    if not (np.isfinite(args.blur) and args.blur >= 0):
+        ap.error(f"--blur must be a finite number of pixels >= 0, got {args.blur}")
+    if needs_run and not (args.run / "checkpoint.pt").is_file():
         ap.error(f"{args.run / 'checkpoint.pt'}: not found (--run: a finished fusiongs deblur run)")
     if min(args.iters, args.reps) < 1 or args.spread < 0:
         ap.error("--iters and --reps must be at least 1, --spread at least 0")
@@ -290,7 +344,14 @@ def main(argv: list[str] | None = None) -> int:
             params, rel_sigma = estimated_sensor(cfg.dvs, est, scene.events, cfg.duration)
             row["sensor_est"] = dataclasses.asdict(params) | {"relative_spread": rel_sigma}
         frames = scene.frames
-        if args.video == "sim":
+        if args.video == "sim" and (args.blur or args.trajectory == "run"):
+            try:
+                logs, frames = sim_video(scene, cfg, args.blur,
+                                         args.run if args.trajectory == "run" else None)
+            except InputError as exc:  # a checkpoint that does not load
+                ap.error(str(exc))
+            row |= {"blur_px": args.blur, "trajectory": args.trajectory}
+        elif args.video == "sim":
             logs = true_logs(args.scene)[1]
         elif args.video == "flow":
             logs, frames = flow_video(scene, est, cfg)
@@ -302,6 +363,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.real_frames:
             frames = scene.frames
             row["frames"] = "the scene's own"
+        row["fast_steps"] = fast_steps(logs)
+        if args.video != "sim" or args.blur or args.trajectory == "run":
+            row["fast_steps_scene"] = fast_steps(true_logs(args.scene)[1])
         row["first_err"] = (first / true[:, None] - 1).tolist()
         row["iters"] = []
         cur = first
@@ -320,7 +384,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{head} | {args.video} video, {args.sensor} sensor | estimate {_pct(row['first_err'])} % | "
               + " | ".join(f"iteration {k}: bias {_pct(r['bias'])}, corrected {_pct(r['corr_err'])}"
                            for k, r in enumerate(row["iters"]))
-              + f" | events {len(scene.events)} real, {row['iters'][-1]['events'][0]} re-simulated",
+              + f" | events {len(scene.events)} real, {row['iters'][-1]['events'][0]} re-simulated"
+              + f" | fast steps {row['fast_steps']}"
+              + (f" (scene's own {row['fast_steps_scene']})" if "fast_steps_scene" in row else ""),
               flush=True)
     row["seconds"] = time.perf_counter() - t0
     if args.json:

@@ -4,14 +4,23 @@ events, on streams whose rates and crossings are known."""
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from benchmarks.bench_calibrate_resim import events_with, isolated_rates, own_log
+from benchmarks.bench_calibrate_resim import (
+    events_with,
+    fast_steps,
+    isolated_rates,
+    main,
+    own_log,
+    sim_video,
+)
 from fusiongs.events.stream import EventStream
-from fusiongs.sim.dvs import DVSParams
-from fusiongs.sim.simulate import SimConfig
+from fusiongs.frames.frameset import FrameSet
+from fusiongs.sim.dvs import DVSParams, sensor_log
+from fusiongs.sim.simulate import SimConfig, scene_renderer
 
 W, H, T = 60, 40, 4.0  # sensor and span (s)
 
@@ -82,3 +91,35 @@ def test_own_log_takes_each_pixels_channel():
     assert np.allclose(np.exp(out), [0.5, 0.25, 0.25, 0.125])
     grey = own_log(img, None, 0.0)
     assert np.allclose(np.exp(grey), 0.299 * 0.5 + 0.587 * 0.25 + 0.114 * 0.125)
+
+
+def test_fast_steps_count_large_changes_between_render_steps():
+    logs = np.zeros((4, 3), np.float32)
+    logs[1, 0], logs[2, 0] = 0.5, 0.1  # up 0.5, down 0.4: two fast steps
+    logs[1:, 1] = 0.2  # one step of 0.2: not fast
+    logs[3, 2] = -0.31  # one fast step down
+    assert fast_steps(logs) == 3
+    assert fast_steps(logs, step=0.45) == 1
+
+
+def test_sim_video_matches_the_simulator_and_blur_takes_fast_steps_away():
+    cfg = SimConfig(preset="wall", width=40, height=30, duration=0.02, dvs_rate_hz=1000.0, seed=5,
+                    cfa="RGGB")
+    frames = FrameSet(np.zeros((1, 30, 40, 3), np.float32), np.array([0.0]), np.array([0.01]),
+                      ["f0"], "linear")
+    logs, made = sim_video(SimpleNamespace(frames=frames), cfg)
+    render = scene_renderer(cfg).render
+    for k in (0, 20):
+        assert np.allclose(logs[k], sensor_log(render(k * 1e-3), "RGGB", cfg.dvs.eps), atol=1e-5)
+    assert made.images.shape == (1, 30, 40, 3) and float(made.images.max()) > 0  # frames made again
+    blurred, _ = sim_video(SimpleNamespace(frames=frames), cfg, blur=1.5)
+    assert fast_steps(blurred, 0.05) < fast_steps(logs, 0.05)
+
+
+@pytest.mark.parametrize("args", [["--video", "flow", "--blur", "0.5"], ["--trajectory", "run"],
+                                  ["--blur", "-1"]])
+def test_main_refuses_inconsistent_variants(args, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["no_such_scene", *args])
+    assert exc.value.code == 2
+    assert len(capsys.readouterr().err.strip().splitlines()[-1]) > 0
