@@ -21,6 +21,13 @@ and every pixel's signed count is compared between the two streams:
   dead-time law ``n / (1 - n r / T)`` and half of each event's bound ``r / (dt - r)`` (at most 3)
   on the crossings lost before it; mean shortfall (true minus estimate) and mean absolute error.
 
+A third table predicts each window's emitted count from the true log intensities at its two ends
+alone, as training sees a window (two renders): the plain ``ΔL / θ``, and the dead-time laws of
+:func:`dead_time_count` (an edge whose intensity, not its log, moves linearly over the window;
+a pixel that resets its reference after the dead time, or the simulator's, which keeps it).
+Mean absolute error against the emitted count, over the active pixel-windows and over those that
+lost crossings.
+
 The default rule is the reference every row is compared with. Grey and colour sensors alike (each
 pixel sees its own channel's log intensity, as the simulator's sensor does).
 
@@ -66,6 +73,7 @@ def pixel_streams(scene: Path) -> dict:
     if drift is not None:
         leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
     out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6,
+           "logs": logs, "theta": (th_on * scale, th_off * scale),
            "duration_s": float(cfg.duration), "times": times,
            "true_fast": true_fast_steps(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s)}
     for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):
@@ -83,6 +91,40 @@ def true_fast_steps(logs: np.ndarray, times: np.ndarray, th_on: np.ndarray, th_o
     per_dead = np.abs(d) / np.where(d > 0, th_on, th_off) * (dead_s / (times[1] - times[0]))
     zero = np.zeros((1, logs.shape[1]), np.int32)
     return np.concatenate([zero, np.cumsum(per_dead > 1.0, axis=0, dtype=np.int32)])
+
+
+def dead_time_count(log_a: np.ndarray, log_b: np.ndarray, dur_s: float, theta_on: np.ndarray,
+                    theta_off: np.ndarray, dead_s: float, pixel: str = "grid") -> np.ndarray:
+    """Expected signed count of a pixel whose log intensity goes from ``log_a`` to ``log_b`` (``[P]``,
+    ``log(I + ε)``) over ``dur_s`` seconds, under a dead time of ``dead_s``.
+
+    The intensity ``e = I + ε`` is taken to move linearly in time (an edge passing over a pixel
+    that integrates its area), so the crossing rate is ``r = |ė| / (θ e)``, fastest where ``e`` is
+    small. ``κ = |e_b − e_a| d / (T θ)`` is where ``r d = 1``. Two pixel models:
+
+    - ``"reset"``: the reference is taken again when the dead time ends (a physical DVS pixel's
+      reset), so events come at most every ``d + 1/r``, the non-paralysable law ``r / (1 + r d)``
+      (e.g. Knoll, *Radiation Detection and Measurement*, ch. 4). Integrated:
+      ``log((e_b + κ) / (e_a + κ)) / θ``.
+    - ``"grid"``: the reference keeps every crossing and only events are dropped (this project's
+      simulator, :func:`fusiongs.sim.dvs.dvs_events`): every ``ceil(r d)``-th crossing is emitted,
+      on average ``r / (r d + 1/2)`` where ``r d > 1/2``. Integrated: ``(2/θ) log`` of
+      ``(e + 2κ)`` over the part below ``e = 2κ`` plus the plain ``log e / θ`` above it.
+
+    Both are the plain ``(log_b − log_a) / θ`` when ``d = 0``. ``θ`` is the ON threshold for a
+    rise and the OFF one for a fall (``[P]`` each).
+    """
+    th = np.where(log_b > log_a, theta_on, theta_off)
+    ea, eb = np.exp(log_a.astype(np.float64)), np.exp(log_b.astype(np.float64))
+    kappa = np.abs(eb - ea) * dead_s / (max(dur_s, 1e-12) * th)
+    if pixel == "reset":
+        return (np.log(eb + kappa) - np.log(ea + kappa)) / th
+    if pixel != "grid":
+        raise ValueError(f"pixel: expected 'reset' or 'grid', got {pixel!r}")
+    lo, hi, b = np.minimum(ea, eb), np.maximum(ea, eb), 2.0 * kappa
+    m = np.clip(b, lo, hi)
+    n = (2.0 * np.log((m + b) / (lo + b)) + np.log(hi / m)) / th
+    return np.where(eb >= ea, n, -n)
 
 
 def dilate(mask: np.ndarray, radius: int) -> np.ndarray:
@@ -122,6 +164,16 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
     acc = {k: np.zeros(2) for k in rules}
     tot = np.zeros(2)
     corr = np.zeros(7)
+    logs, times_s = s["logs"], s["times"]
+    th_on, th_off = s["theta"]
+    names = ("ΔL / θ", "dead-time law, reset pixel", "dead-time law, grid pixel (the simulator's)")
+    pacc = np.zeros((2, 1 + 2 * len(names)))  # rows: active, lost; columns: n, |err| each, err each
+
+    def log_at(t_s: float) -> np.ndarray:  # linear between render instants, as the sensor saw it
+        k = int(np.clip(np.searchsorted(times_s, t_s) - 1, 0, len(times_s) - 2))
+        w_ = (t_s - times_s[k]) / (times_s[k + 1] - times_s[k])
+        return (1.0 - w_) * logs[k].astype(np.float64) + w_ * logs[k + 1].astype(np.float64)
+
     for _ in range(n_windows):
         dur = float(np.exp(rng.uniform(np.log(min(1e-3, longest)), np.log(longest))))
         ta = rng.uniform(0.0, span - dur) * 1e6
@@ -143,17 +195,30 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
         marks["the true rate (oracle)"] = true_fast[k1] - true_fast[k0] > 0
         for k in rules:
             acc[k] += [(wrong & ~marks[k]).sum(), (marks[k] & active).sum()]
+        la, lb = log_at(ta * 1e-6), log_at(tb * 1e-6)
+        plain = (lb - la) / np.where(lb > la, th_on, th_off)
+        laws = [dead_time_count(la, lb, dur, th_on, th_off, r * 1e-6, k) for k in ("reset", "grid")]
+        # errors in the direction of the pixel's change (positive: the prediction is too large)
+        sgn = np.where(lb >= la, 1.0, -1.0)
+        for row, m in enumerate((active, active & wrong)):
+            preds = [plain, *laws]
+            pacc[row] += [m.sum(), *(np.abs(q - nd)[m].sum() for q in preds),
+                          *((sgn * (q - nd))[m].sum() for q in preds)]
         sel = ~own & (n_any > 0)
         true, emitted = np.abs(nc[sel]), np.abs(nd[sel])
-        law = emitted / np.clip(1.0 - n_any[sel] * r / (dur * 1e6), 0.2, 1.0)
+        law_n = emitted / np.clip(1.0 - n_any[sel] * r / (dur * 1e6), 0.2, 1.0)
         half = emitted + 0.5 * np.bincount(di[md], weights=bound[md], minlength=n_pix)[sel]
-        corr += [sel.sum(), (true - emitted).sum(), np.abs(true - emitted).sum(), (true - law).sum(),
-                 np.abs(true - law).sum(), (true - half).sum(), np.abs(true - half).sum()]
+        corr += [sel.sum(), (true - emitted).sum(), np.abs(true - emitted).sum(), (true - law_n).sum(),
+                 np.abs(true - law_n).sum(), (true - half).sum(), np.abs(true - half).sum()]
     return {"active": tot[0], "wrong": tot[1] / tot[0],
             "rules": {k: (a[0] / tot[1], a[1] / tot[0]) for k, a in acc.items()},
             "corrections": {"none": (corr[1] / corr[0], corr[2] / corr[0]),
                             "n / (1 - n r / T)": (corr[3] / corr[0], corr[4] / corr[0]),
-                            "half of r / (dt - r)": (corr[5] / corr[0], corr[6] / corr[0])}}
+                            "half of r / (dt - r)": (corr[5] / corr[0], corr[6] / corr[0])},
+            "predictions": {name: {grp: (pacc[i, 1 + j] / pacc[i, 0],
+                                         pacc[i, 1 + len(names) + j] / pacc[i, 0])
+                                   for i, grp in enumerate(("active", "lost"))}
+                            for j, name in enumerate(names)}}
 
 
 def lost_crossings(s: dict) -> dict:
@@ -204,6 +269,13 @@ def main(argv=None) -> int:
     print("|---|---|---|")
     for k, (bias, mae) in tab["corrections"].items():
         print(f"| {k}{' (reference)' if k == 'none' else ''} | {bias:.3f} | {mae:.3f} |")
+    print("\n| emitted count predicted from the window's two end levels | mean absolute error, active | "
+          "excess, active | mean absolute error, lost crossings | excess, lost crossings |")
+    print("|---|---|---|---|---|")
+    for k, v in tab["predictions"].items():
+        ref_mark = " (reference)" if k == "ΔL / θ" else ""
+        print(f"| {k}{ref_mark} | {v['active'][0]:.3f} | {v['active'][1]:+.3f} | {v['lost'][0]:.3f} "
+              f"| {v['lost'][1]:+.3f} |")
     return 0
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.bench_dead_time_losses import (
+    dead_time_count,
     dilate,
     lost_crossings,
     previous_gap,
@@ -40,7 +41,7 @@ def _streams() -> dict:
                      0.125 * np.minimum(k, 4)], axis=1)
     th = np.full(3, 0.2)
     return {"width": 3, "height": 1, "dead_us": R, "duration_s": 0.006, "dead": stream(dead_t, dead_i),
-            "clean": stream(clean_t, clean_i), "times": times,
+            "clean": stream(clean_t, clean_i), "times": times, "logs": logs, "theta": (th, th),
             "true_fast": true_fast_steps(logs, times, th, th, R * 1e-6)}
 
 
@@ -84,3 +85,37 @@ def test_true_fast_steps_and_the_oracle_rule_marks_every_loss():
     assert missed == 0  # every window with a lost crossing meets a fast step of its pixel
     assert 0 < censored < 1  # pixel 2's windows are never censored
     assert tab["rules"]["default"][0] > 0  # while the default misses pixel 1's loss
+
+
+def test_dead_time_count_is_the_plain_change_without_dead_time_and_follows_the_pixel_model():
+    from fusiongs.sim import dvs
+
+    la, lb, th = np.array([-5.0, -1.0]), np.array([-1.0, -5.0]), np.full(2, 0.2)
+    for pixel in ("reset", "grid"):
+        assert np.allclose(dead_time_count(la, lb, 0.01, th, th, 0.0, pixel), [20.0, -20.0])
+    # an edge over a pixel: the intensity rises linearly from near black, fastest in log at first
+    cases = [(0.002, 0.8, 0.01, 1e-3), (0.8, 0.002, 0.01, 1e-3), (0.05, 0.5, 0.02, 5e-4),
+             (0.3, 0.05, 0.004, 9e-4), (0.1, 0.2, 0.01, 1e-3)]
+    for i0, i1, dur, dead in cases:
+        t = np.linspace(0.0, dur, 4001)
+        logs = np.log(i0 + (i1 - i0) * t / dur + 1e-3)[:, None].astype(np.float32)
+        one = np.array([0.2])
+        emitted = int(dvs.dvs_events(logs, t, one, one, dead)[2].sum())
+        grid = float(dead_time_count(logs[:1, 0], logs[-1:, 0], dur, one, one, dead, "grid")[0])
+        reset = float(dead_time_count(logs[:1, 0], logs[-1:, 0], dur, one, one, dead, "reset")[0])
+        plain = float(logs[-1, 0] - logs[0, 0]) / 0.2
+        assert abs(grid - emitted) < 0.6, (i0, i1, grid, emitted)  # the simulator's pixel
+        assert abs(reset) <= abs(grid) + 1e-9 and abs(grid) <= abs(plain) + 1e-9
+    try:
+        dead_time_count(la, lb, 0.01, th, th, 1e-3, "other")
+    except ValueError as exc:
+        assert "pixel" in str(exc)
+    else:
+        raise AssertionError("an unknown pixel model must be refused")
+
+
+def test_window_table_predicts_lost_counts_better_with_the_dead_time_law():
+    tab = window_table(_streams(), 200, 0)
+    plain = tab["predictions"]["ΔL / θ"]["lost"][0]
+    grid = tab["predictions"]["dead-time law, grid pixel (the simulator's)"]["lost"][0]
+    assert grid <= plain
