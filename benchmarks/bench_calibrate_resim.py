@@ -274,7 +274,8 @@ def events_with(cfg: SimConfig, params: DVSParams, logs: np.ndarray, theta: tupl
     p = dataclasses.replace(params, theta_on=theta[0], theta_off=theta[1], theta_sigma=sigma)
     seeds = np.random.SeedSequence([cfg.seed, seed]).spawn(7)
     th_on, th_off, drift, phase = sensor_draws(p, logs.shape[1], cfg.width, seeds)
-    ev = _pixel_events(logs, dense_times(cfg), th_on, th_off, p.refractory_s, drift, phase, 1.0)
+    ev = _pixel_events(logs, dense_times(cfg), th_on, th_off, p.refractory_s, drift, phase, 1.0,
+                       p.refractory_reset)
     t_us, pix, pol = dvs.merge_sorted(ev, *noise_events(p, logs.shape[1], cfg.duration, seeds))
     return EventStream.create(t_us, pix % cfg.width, pix // cfg.width, pol, cfg.width, cfg.height,
                               cfg.cfa, source="re-simulation")

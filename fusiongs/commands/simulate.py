@@ -54,6 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--theta-gradient", default=None,
                         help="thresholds vary by a factor 1±G from the left to the right edge (default 0)")
     parser.add_argument("--refractory-us", default=None, help="refractory period in µs (default 100)")
+    parser.add_argument("--refractory-reset", action="store_true",
+                        help="the pixel takes its level again when the refractory period ends, as a "
+                             "physical pixel's reset (default: the level keeps every crossing); "
+                             "allowed with --sweep-seed")
     parser.add_argument("--ba-rate", default=None, help="background-activity noise, Hz/pixel (default 0.1)")
     parser.add_argument("--hot-pixels", default=None,
                         help="fraction of hot pixels, each firing one polarity at --hot-rate (default 0)")
@@ -161,6 +165,8 @@ def config_from_args(args: argparse.Namespace):
     for opt, (fld, kind, lo, hi) in numbers.items():
         if getattr(args, opt) is not None:
             kw[fld] = _parse_number(getattr(args, opt), opt, kind, lo, hi)
+    if getattr(args, "refractory_reset", False):
+        kw["dvs"] = dataclasses.replace(kw.get("dvs", base.dvs), refractory_reset=True)
     cfg = dataclasses.replace(base, **kw)
     if args.sweep_seed is not None and not cfg.exposure <= cfg.duration / max(cfg.frames, 1):
         raise InputError("simulate", "--frames" if args.frames is not None else "--duration",

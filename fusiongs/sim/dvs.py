@@ -7,9 +7,13 @@ interpolation between render samples follows ESIM, Rebecq et al., CoRL 2018). Be
 samples the log intensity is interpolated linearly in time, so a step that crosses several levels
 gives several events with interpolated timestamps. Per-pixel thresholds vary around distinct ON
 and OFF nominal values; a refractory period drops events that follow the pixel's previous event too
-closely (the stored level still advances, so the change is lost as in a real pixel); background
-activity adds Poisson noise events. Grey sensors see ``I = w . L`` (Rec.601 weights), colour
-sensors one Bayer channel per pixel.
+closely. By default the stored level still advances by every crossing, so the dropped events' change
+is lost but the level stays on its grid of thresholds (:func:`dvs_events`). With
+``refractory_reset`` the pixel instead takes its level again when the refractory period ends, as
+the reset switch of a physical pixel does (Lichtsteiner et al. 2008; :func:`dvs_events_reset`):
+every change during the period is lost, and the next event needs a full threshold from the level
+at the release. Background activity adds Poisson noise events. Grey sensors see ``I = w . L``
+(Rec.601 weights), colour sensors one Bayer channel per pixel.
 
 Two further non-idealities, both off by default:
 
@@ -66,6 +70,9 @@ class DVSParams:
         hot_pixel_rate_hz: event rate of each hot pixel (Hz), polarity fixed per pixel.
         leak_rate_hz: nominal leak (ON) event rate per pixel on a static scene (Hz, 0 = none).
         leak_spread_decades: standard deviation of the per-pixel leak rate in decades (log10).
+        refractory_reset: the pixel takes its stored level again when its refractory period ends
+            (a physical pixel's reset, :func:`dvs_events_reset`) instead of advancing it by every
+            crossing (:func:`dvs_events`, the default).
     """
 
     theta_on: float = 0.25
@@ -80,6 +87,7 @@ class DVSParams:
     hot_pixel_rate_hz: float = 200.0
     leak_rate_hz: float = 0.0
     leak_spread_decades: float = 0.1
+    refractory_reset: bool = False
 
 
 def sensor_log(rgb: torch.Tensor, cfa: str | None, eps: float) -> np.ndarray:
@@ -202,6 +210,62 @@ def dvs_events(logs: np.ndarray, times: np.ndarray, theta_on: np.ndarray, theta_
     if not out_t:
         return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int8)
     return np.concatenate(out_t), np.concatenate(out_i), np.concatenate(out_p)
+
+
+def dvs_events_reset(logs: np.ndarray, times: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray,
+                     refractory_s: float, drift: np.ndarray | None = None,
+                     ref0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Events of all pixels whose stored level is taken again when the refractory period ends.
+
+    A pixel fires when its log intensity (linear in time between render samples) moves one
+    threshold from its stored level; it is then blind for ``refractory_s`` and, at the release,
+    stores the log intensity of that instant (the reset switch of a DVS pixel, Lichtsteiner et al.,
+    IEEE JSSC 2008), so every change during the blind time is lost. Without a refractory period
+    the events are those of :func:`dvs_events`.
+
+    Args and returns: as :func:`dvs_events`.
+    """
+    n_pix = logs.shape[1]
+    ref = (logs[0] if ref0 is None else ref0).astype(np.float64)
+    release = np.full(n_pix, -np.inf)  # end of each pixel's blind time (s)
+    th_on, th_off = np.asarray(theta_on, np.float64), np.asarray(theta_off, np.float64)
+    out_t, out_i, out_p = [], [], []
+    for k in range(logs.shape[0] - 1):
+        a, b = logs[k].astype(np.float64), logs[k + 1].astype(np.float64)
+        if drift is not None:  # leak: a falling reference is a rising signal
+            a, b = a + drift * (times[k] - times[0]), b + drift * (times[k + 1] - times[0])
+        t0, t1 = float(times[k]), float(times[k + 1])
+        slope = (b - a) / (t1 - t0)
+        freed = np.flatnonzero((release > t0) & (release <= t1))
+        ref[freed] = a[freed] + slope[freed] * (release[freed] - t0)
+        start = np.maximum(release, t0)
+        cand = np.flatnonzero((start < t1) & ((b - ref >= th_on) | (ref - b >= th_off)))
+        while cand.size:
+            sl = slope[cand]
+            safe = np.where(sl == 0, 1.0, sl)
+            t_up = np.where(sl > 0, t0 + (ref[cand] + th_on[cand] - a[cand]) / safe, np.inf)
+            t_dn = np.where(sl < 0, t0 + (ref[cand] - th_off[cand] - a[cand]) / safe, np.inf)
+            te = np.maximum(np.minimum(t_up, t_dn), start[cand])
+            fire = te <= t1
+            idx, te = cand[fire], te[fire]
+            if idx.size == 0:
+                break
+            pol = np.where(t_up[fire] <= t_dn[fire], 1, -1).astype(np.int8)
+            out_t.append(np.rint(te * 1e6).astype(np.int64))
+            out_i.append(idx)
+            out_p.append(pol)
+            release[idx] = te + refractory_s
+            # the level at the release (at the event itself without a refractory period: one
+            # threshold on); a release after t1 is taken again at its own step (``freed``)
+            ref[idx] = a[idx] + slope[idx] * (np.minimum(release[idx], t1) - t0)
+            again = release[idx] < t1
+            cand = idx[again]
+            start[cand] = release[cand]
+    if not out_t:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int8)
+    t, i, p = np.concatenate(out_t), np.concatenate(out_i), np.concatenate(out_p)
+    order = np.argsort(t, kind="stable")
+    return t[order], i[order], p[order]
 
 
 def background_activity(rate_hz: float, n_pixels: int, t0_s: float, t1_s: float,

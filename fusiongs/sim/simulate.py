@@ -107,7 +107,8 @@ class SimConfig:
                 ("hot_pixel_fraction", 0 <= d.hot_pixel_fraction <= 1, "a fraction in [0, 1]"),
                 ("hot_pixel_rate_hz", d.hot_pixel_rate_hz >= 0, "a non-negative rate"),
                 ("leak_rate_hz", d.leak_rate_hz >= 0, "a non-negative rate"),
-                ("leak_spread_decades", d.leak_spread_decades >= 0, "a non-negative spread")):
+                ("leak_spread_decades", d.leak_spread_decades >= 0, "a non-negative spread"),
+                ("refractory_reset", isinstance(d.refractory_reset, bool), "true or false")):
             if not ok:
                 raise InputError("simulate", f"dvs.{name}", expected, repr(getattr(d, name)))
         return self
@@ -205,7 +206,8 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
         scale = tune_threshold_scale(logs, th_on, th_off, cfg.events_target)
 
     def events_at(s: float):
-        return _pixel_events(logs, times, th_on * s, th_off * s, cfg.dvs.refractory_s, drift, phase, s)
+        return _pixel_events(logs, times, th_on * s, th_off * s, cfg.dvs.refractory_s, drift, phase, s,
+                             cfg.dvs.refractory_reset)
 
     ev = events_at(scale)
     for _ in range(2 if cfg.events_target is not None else 0):
@@ -249,8 +251,9 @@ def run_simulation(cfg: SimConfig, preset=None) -> SimResult:
         "theta_sigma": cfg.dvs.theta_sigma * scale, "threshold_scale": scale,
         "theta_on_pixel_mean": float(th_on.mean() * scale),
         "theta_off_pixel_mean": float(th_off.mean() * scale),
-        "refractory_s": cfg.dvs.refractory_s, "ba_rate_hz": cfg.dvs.ba_rate_hz,
-        "hot_pixel_fraction": cfg.dvs.hot_pixel_fraction, "hot_pixel_rate_hz": cfg.dvs.hot_pixel_rate_hz,
+        "refractory_s": cfg.dvs.refractory_s, "refractory_reset": cfg.dvs.refractory_reset,
+        "ba_rate_hz": cfg.dvs.ba_rate_hz, "hot_pixel_fraction": cfg.dvs.hot_pixel_fraction,
+        "hot_pixel_rate_hz": cfg.dvs.hot_pixel_rate_hz,
         "hot_pixels": dvs.hot_pixel_count(cfg.dvs.hot_pixel_fraction, n_pixels),
         "events_hot": int(hot[0].size),
         "events_background": int(noise[0].size), "leak_rate_hz": cfg.dvs.leak_rate_hz,
@@ -286,13 +289,14 @@ def noise_events(params: dvs.DVSParams, n_pixels: int, duration: float, seeds: l
     return noise, hot
 
 
-def _pixel_events(logs, times, th_on, th_off, refractory_s, drift, phase, scale):
-    """:func:`dvs.dvs_events` with the leak (``drift``, ``phase`` of :func:`dvs.leak_drift`, or
-    ``None``) at thresholds scaled by ``scale``."""
+def _pixel_events(logs, times, th_on, th_off, refractory_s, drift, phase, scale, reset=False):
+    """:func:`dvs.dvs_events` (or :func:`dvs.dvs_events_reset` when ``reset``) with the leak
+    (``drift``, ``phase`` of :func:`dvs.leak_drift`, or ``None``) at thresholds scaled by ``scale``."""
+    model = dvs.dvs_events_reset if reset else dvs.dvs_events
     if drift is None:
-        return dvs.dvs_events(logs, times, th_on, th_off, refractory_s)
-    return dvs.dvs_events(logs, times, th_on, th_off, refractory_s, drift=drift * scale,
-                          ref0=logs[0] - phase * th_on)
+        return model(logs, times, th_on, th_off, refractory_s)
+    return model(logs, times, th_on, th_off, refractory_s, drift=drift * scale,
+                 ref0=logs[0] - phase * th_on)
 
 
 def simulate_scene(cfg: SimConfig) -> tuple[Scene, dict[str, np.ndarray]]:

@@ -10,18 +10,25 @@ import torch
 from fusiongs.sim import dvs
 
 
+def pixel_segments(logs, times, i, drift=None):
+    """``(t0, t1, a, b)`` of pixel ``i`` per render step: its log intensity at both ends, a leak
+    ``drift`` added to the signal (``drift * (t - t0)``, the same as lowering the reference)."""
+    for k in range(logs.shape[0] - 1):
+        a, b = float(logs[k, i]), float(logs[k + 1, i])
+        if drift is not None:
+            a += drift[i] * (times[k] - times[0])
+            b += drift[i] * (times[k + 1] - times[0])
+        yield float(times[k]), float(times[k + 1]), a, b
+
+
 def reference_dvs(logs, times, th_on, th_off, refractory, drift=None, ref0=None):
     """Slow, obviously-correct model: every pixel, every step, one crossing at a time. A leak
     ``drift`` lowers the reference by ``drift * (t - t0)``: the same as raising the signal."""
     events = []
     for i in range(logs.shape[1]):
         ref, t_last = float(logs[0, i] if ref0 is None else ref0[i]), -math.inf
-        for k in range(logs.shape[0] - 1):
-            a, b = float(logs[k, i]), float(logs[k + 1, i])
-            if drift is not None:
-                a += drift[i] * (times[k] - times[0])
-                b += drift[i] * (times[k + 1] - times[0])
-            t0, dt = float(times[k]), float(times[k + 1] - times[k])
+        for t0, t1, a, b in pixel_segments(logs, times, i, drift):
+            dt = t1 - t0
             while True:
                 if b - ref >= th_on[i]:
                     sign, th = 1, th_on[i]
