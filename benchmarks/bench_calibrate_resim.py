@@ -306,7 +306,8 @@ def main(argv: list[str] | None = None) -> int:
     if needs_run and args.run is None:
         ap.error("--video model and --trajectory run need --run (a finished fusiongs deblur run of "
                  "the scene)")
-    if (args.blur or args.trajectory == "run") and args.video != "sim":
+    variant = bool(args.blur) or args.trajectory == "run"  # a changed simulator video
+    if variant and args.video != "sim":
         ap.error("--blur and --trajectory run are variants of --video sim")
     if not (np.isfinite(args.blur) and args.blur >= 0):
         ap.error(f"--blur must be a finite number of pixels >= 0, got {args.blur}")
@@ -345,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
             params, rel_sigma = estimated_sensor(cfg.dvs, est, scene.events, cfg.duration)
             row["sensor_est"] = dataclasses.asdict(params) | {"relative_spread": rel_sigma}
         frames = scene.frames
-        if args.video == "sim" and (args.blur or args.trajectory == "run"):
+        if args.video == "sim" and variant:
             try:
                 logs, frames = sim_video(scene, cfg, args.blur,
                                          args.run if args.trajectory == "run" else None)
@@ -365,7 +366,7 @@ def main(argv: list[str] | None = None) -> int:
             frames = scene.frames
             row["frames"] = "the scene's own"
         row["fast_steps"] = fast_steps(logs)
-        if args.video != "sim" or args.blur or args.trajectory == "run":
+        if args.video != "sim" or variant:
             row["fast_steps_scene"] = fast_steps(true_logs(args.scene)[1])
         row["first_err"] = (first / true[:, None] - 1).tolist()
         row["iters"] = []

@@ -49,7 +49,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks.bench_event_only_diagnose import sim_config  # noqa: E402
+from benchmarks.bench_event_only_diagnose import TrueLog, sim_config, true_logs  # noqa: E402
 from fusiongs.events.stats import fast_event_mask  # noqa: E402
 from fusiongs.events.stream import EventStream  # noqa: E402
 from fusiongs.train.data import square_dilate  # noqa: E402
@@ -58,28 +58,23 @@ from fusiongs.train.data import square_dilate  # noqa: E402
 def pixel_streams(scene: Path) -> dict:
     """Pixel events of ``scene`` with and without its refractory period, at its thresholds:
     ``{"dead": (t, pixel, p), "clean": (t, pixel, p), "width", "height", "dead_us", "duration_s"}``
-    (t in µs from the recording's start)."""
-    from fusiongs.sim import dvs
-    from fusiongs.sim.simulate import scene_renderer, sensor_draws
+    (t in µs from the recording's start), by the scene's own pixel model. The dense renders are
+    :func:`benchmarks.bench_event_only_diagnose.true_logs` (cached in ``scene/gt/true_logs.npz``,
+    the only file this benchmark writes)."""
+    from fusiongs.sim.simulate import _pixel_events, sensor_draws
 
     cfg = sim_config(scene)
     scale = float(json.loads((scene / "gt" / "sim.json").read_text())["threshold_scale"])
-    render = scene_renderer(cfg).render
     seeds = np.random.SeedSequence(cfg.seed).spawn(7)  # the simulator's streams
-    times = np.linspace(0.0, cfg.duration, int(round(cfg.duration * cfg.dvs_rate_hz)) + 1)
-    logs = np.stack([dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps) for t in times])
-    logs = logs.astype(np.float32)
+    times, logs = true_logs(scene)  # the simulator's dense renders (cached in the scene's gt/)
     th_on, th_off, drift, phase = sensor_draws(cfg.dvs, logs.shape[1], cfg.width, seeds)
-    leak = {}
-    if drift is not None:
-        leak = {"drift": drift * scale, "ref0": logs[0] - phase * th_on * scale}
     out = {"width": cfg.width, "height": cfg.height, "dead_us": cfg.dvs.refractory_s * 1e6,
            "logs": logs, "theta": (th_on * scale, th_off * scale), "reset": cfg.dvs.refractory_reset,
            "duration_s": float(cfg.duration), "times": times,
            "true_fast": true_fast_steps(logs, times, th_on * scale, th_off * scale, cfg.dvs.refractory_s)}
-    for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):
-        model = dvs.dvs_events_reset if cfg.dvs.refractory_reset else dvs.dvs_events  # the scene's pixel
-        out[name] = model(logs, times, th_on * scale, th_off * scale, r, **leak)
+    for name, r in (("dead", cfg.dvs.refractory_s), ("clean", 0.0)):  # the scene's own pixel model
+        out[name] = _pixel_events(logs, times, th_on * scale, th_off * scale, r, drift, phase, scale,
+                                  cfg.dvs.refractory_reset)
     return out
 
 
@@ -166,15 +161,10 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
     acc = {k: np.zeros(2) for k in rules}
     tot = np.zeros(2)
     corr = np.zeros(9)
-    logs, times_s = s["logs"], s["times"]
+    truth = TrueLog(s["times"], s["logs"].astype(np.float64))  # linear between render instants
     th_on, th_off = s["theta"]
     names = ("ΔL / θ", "dead-time law, reset pixel", "dead-time law, grid pixel (the simulator's)")
     pacc = np.zeros((2, 1 + 2 * len(names)))  # rows: active, lost; columns: n, |err| each, err each
-
-    def log_at(t_s: float) -> np.ndarray:  # linear between render instants, as the sensor saw it
-        k = int(np.clip(np.searchsorted(times_s, t_s) - 1, 0, len(times_s) - 2))
-        w_ = (t_s - times_s[k]) / (times_s[k + 1] - times_s[k])
-        return (1.0 - w_) * logs[k].astype(np.float64) + w_ * logs[k + 1].astype(np.float64)
 
     for _ in range(n_windows):
         dur = float(np.exp(rng.uniform(np.log(min(1e-3, longest)), np.log(longest))))
@@ -197,7 +187,7 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
         marks["the true rate (oracle)"] = true_fast[k1] - true_fast[k0] > 0
         for k in rules:
             acc[k] += [(wrong & ~marks[k]).sum(), (marks[k] & active).sum()]
-        la, lb = log_at(ta * 1e-6), log_at(tb * 1e-6)
+        la, lb = truth.at(ta * 1e-6).numpy(), truth.at(tb * 1e-6).numpy()
         plain = (lb - la) / np.where(lb > la, th_on, th_off)
         laws = [dead_time_count(la, lb, dur, th_on, th_off, r * 1e-6, k) for k in ("reset", "grid")]
         # errors in the direction of the pixel's change (positive: the prediction is too large)
