@@ -16,6 +16,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--samples", type=int, default=None,
                         help="instants per exposure of the EDI ratio (default 12)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the pixel subsets and bootstrap")
+    parser.add_argument("--pixel-model", choices=("auto", "step", "reset"), default="auto",
+                        help="how the pixels lose events in their dead time: reset (a DVS pixel held "
+                             "in reset: each event weighted by the crossings it stands for), step "
+                             "(the reference level keeps every crossing: fast pixels gated only), or "
+                             "auto: told from the intervals between a pixel's events (default)")
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
@@ -41,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
     from fusiongs.events.thresholds import calibration_document, write_calibration
     from fusiongs.io.scene_io import load_scene
 
-    opts = CalibrateOptions(seed=args.seed)
+    opts = CalibrateOptions(seed=args.seed, pixel_model=args.pixel_model)
     if args.samples is not None:
         if args.samples < 2:
             raise InputError("command line", "--samples", "an integer >= 2", args.samples)
@@ -68,6 +73,9 @@ def run(args: argparse.Namespace) -> int:
               "counts of pixels firing faster than events.censor (default 2) times it as lower bounds"
               if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
+    if str(th.details.get("pixel_model", "")).startswith("reset") and dead:
+        print("pixel model: reset (the intervals rise from their floor without a step): each event "
+              "counted as the threshold crossings it stands for, interval / (interval - dead time)")
     spread = th.details.get("threshold_spread")
     if isinstance(spread, dict):
         sd = [float(v) ** 0.5 for v in spread["log_variance"]]

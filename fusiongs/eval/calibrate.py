@@ -33,6 +33,20 @@ keeps the pixels with large thresholds (measured on tuning seed 75: +10 to +24 %
 offset of the sensor) are left out; hot pixels are spatial outliers of the event count. The
 uncertainty is a bootstrap over spatial tiles.
 
+A DVS pixel held in reset during its dead time (Lichtsteiner et al., IEEE JSSC 2008) loses all
+the change of its blind time, not only the events: every event on a fast edge stands for more
+than one threshold, and pixels a few dead times apart lose 20-50 % of their change, which the gate
+does not reach. Under that pixel model each event counts ``Δt / (Δt - d)`` crossings
+(:func:`fusiongs.events.stats.reset_weights`) in every count below, ``d`` the onset of the
+intervals (:func:`fusiongs.events.stats.interval_floor`). The intervals alone cannot tell such a
+pixel from one whose level keeps every crossing (a scene's fastest edge also makes a floor, and a
+reset pixel on sharp edges also makes a step), so with frames and an onset ``pixel_model="auto"``
+fits both models and keeps the one whose counts explain the frames' log changes best (the higher
+mean agreement over channels, :func:`fusiongs.eval.calibrate_fit.agreement`). Measured on the 173x130
+tuning scenes (RESULTS.md, session 36): it keeps the step model on all 9 default-pixel scenes and
+the reset model on 6 of the 8 scenes simulated again with a reset pixel, whose largest error goes
+from 8.8-39.3 % to 1.1-22.2 % (6 / 8 within 10 %, before 1 / 8).
+
 Threshold spread: every fit that adds up pixels' moments weighs a pixel by its event count, i.e.
 by ``1 / theta_p``, and so measures the harmonic mean of the pixels' thresholds, below their mean
 by a factor ``E[theta] E[1 / theta] ~ exp(var log theta)``. The variance is measured from the
@@ -60,13 +74,21 @@ from fusiongs.eval.calibrate_fit import PairData, search_both
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
-from fusiongs.events.stats import dead_time_us, fast_in_spans, spatial_hot_pixels, threshold_spread
+from fusiongs.events.stats import (
+    fast_in_spans,
+    interval_floor,
+    reset_weights,
+    spatial_hot_pixels,
+    threshold_spread,
+)
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
 from fusiongs.frames.frameset import FrameSet
 
 REC601 = (0.299, 0.587, 0.114)
 
+
+PIXEL_MODELS = ("auto", "step", "reset")  # CalibrateOptions.pixel_model
 
 @dataclass(frozen=True)
 class CalibrateOptions:
@@ -102,6 +124,14 @@ class CalibrateOptions:
             seed 1076, session 15: +84 %). Otherwise the uncertain neighbours' fit is kept.
         dead_time_jump: jump factor of the interval histogram that marks the dead time
             (:func:`fusiongs.events.stats.dead_time_us`).
+        pixel_model: how the sensor's pixels lose events in their dead time: ``"step"`` (the
+            reference level keeps every crossing, the dead time is the step of the interval
+            histogram, fast pixel pairs are gated), ``"reset"`` (a DVS pixel held in reset: the
+            dead time is the onset of the intervals and every event counts
+            :func:`~fusiongs.events.stats.reset_weights` crossings, the gate kept), or ``"auto"``:
+            reset where the intervals rise from their floor without a step
+            (:class:`~fusiongs.events.stats.IntervalFloor`).
+        reset_weight_cap: the largest weight of one event on a reset pixel.
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision
             (:func:`shrink_channels`; 0 keeps every channel on its own).
@@ -143,6 +173,8 @@ class CalibrateOptions:
     refractory_max_uncertainty: float = 0.1
     own_gate_max_spread: float = 1.05
     dead_time_jump: float = 5.0
+    pixel_model: str = "auto"
+    reset_weight_cap: float = 4.0
     channel_prior: float = 0.05
     channel_outlier: float = 2.0
     max_gap: int = 4
@@ -297,41 +329,26 @@ def _check_inputs(frames: FrameSet, events: EventStream) -> None:
                          f"{events.height}", f"{frames.images.shape[2]}x{frames.images.shape[1]}")
 
 
-def estimate_thresholds(frames: FrameSet, events: EventStream,
-                        opts: CalibrateOptions | None = None) -> SensorThresholds:
-    """ON / OFF thresholds per channel of an event sensor, with uncertainties.
-
-    Args:
-        frames: the scene's frames (possibly blurry; any response, linearised here). Two or more
-            give the consistency estimate; one or none give only the ON/OFF ratio
-            (``scale_known`` False, the scale ``opts.unknown_scale``).
-        events: the time-sorted stream of the same pixel grid.
-        opts: settings (:class:`CalibrateOptions`).
-
-    Returns:
-        :class:`SensorThresholds` with ``channels`` ``("grey",)`` or ``("R", "G", "B")``.
-    """
-    opts = opts or CalibrateOptions()
-    _check_inputs(frames, events)
+def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, hot: np.ndarray,
+               chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions, reset: bool,
+               dead: float) -> dict:
+    """The event balance and (two frames or more) the per-channel consistency fits under one pixel
+    model: ``reset`` weighs every event by :func:`~fusiongs.events.stats.reset_weights` with the
+    dead time ``dead`` (µs; also the refractory gate's unit). Returns the fits, the threshold
+    spread and the mean over channels of the fits' agreement (-inf without frames)."""
     rng = np.random.default_rng(opts.seed)
-    hot = spatial_hot_pixels(events, opts.hot_factor, opts.hot_floor)
-    chan = pixel_channels(events)
-    names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS
-    ratio = _balance_ratio(events, chan, hot, len(names), opts, rng)
-    details = {"hot_pixels": int(hot.sum()), "events": int(len(events)), "frames": int(len(frames)),
-               "ratio_from_event_balance": [r["ratio"] for r in ratio]}
-    if len(frames) < 2:
-        return _without_pairs(frames, events, names, ratio, opts, details)
-    lin = frames.to_linear()
+    weights = reset_weights(events, dead, opts.reset_weight_cap) if reset and dead > 0 else None
+    ratio = _balance_ratio(events, chan, hot, len(names), opts, rng, weights)
+    if lin is None:
+        return {"ratio": ratio, "dead": dead, "agreement": -np.inf}
     sens = sensor_intensity(lin, events.cfa)
     f = len(frames)
     ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
     mids = 0.5 * (ts + te)
-    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples)
+    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples, weights)
                        .reshape(opts.n_samples, 2, -1)) for a, b in zip(ts, te)]
-    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)))
-                        .reshape(2, -1) for i in range(f - 1)])
-    dead = dead_time_us(events, opts.dead_time_jump)
+    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)),
+                                          weights).reshape(2, -1) for i in range(f - 1)])
     gap = opts.refractory_gate * dead
     spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
     fast = fast_in_spans(events, gap, spans)
@@ -339,7 +356,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                                opts.refractory_self)
     sat = np.asarray(lin.max(axis=-1)).reshape(f, -1) >= opts.saturation
     neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
-    var, n_spread = threshold_spread(events, hot)
+    var, n_spread = threshold_spread(events, hot, weights=weights)
     spread_small = bool(np.all(np.exp(var) <= opts.own_gate_max_spread))
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
     for c in range(len(names)):
@@ -386,10 +403,65 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
                                             "count_units")}
                    | {"refractory_gate": gate, "neighbour_gate_fit": res.get("neighbour_gate_fit")})
-    details.update({"dead_time_us": dead, "refractory_gap_us": gap, "per_channel": per,
-                    "n_samples": opts.n_samples})
-    tp, sp = np.array(out_p), np.array(sd_p)
-    tn, sn = np.array(out_n), np.array(sd_n)
+    agreement = [c["agreement"] for c in per if c.get("agreement") is not None
+                 and np.isfinite(c["agreement"])]
+    return {"ratio": ratio, "dead": dead, "gap": gap, "per": per, "var": var, "n_spread": n_spread,
+            "tp": out_p, "tn": out_n, "sp": sd_p, "sn": sd_n,
+            "agreement": float(np.mean(agreement)) if agreement else -np.inf}
+
+
+def estimate_thresholds(frames: FrameSet, events: EventStream,
+                        opts: CalibrateOptions | None = None) -> SensorThresholds:
+    """ON / OFF thresholds per channel of an event sensor, with uncertainties.
+
+    Args:
+        frames: the scene's frames (possibly blurry; any response, linearised here). Two or more
+            give the consistency estimate; one or none give only the ON/OFF ratio
+            (``scale_known`` False, the scale ``opts.unknown_scale``).
+        events: the time-sorted stream of the same pixel grid.
+        opts: settings (:class:`CalibrateOptions`).
+
+    Returns:
+        :class:`SensorThresholds` with ``channels`` ``("grey",)`` or ``("R", "G", "B")``.
+    """
+    opts = opts or CalibrateOptions()
+    _check_inputs(frames, events)
+    if opts.pixel_model not in PIXEL_MODELS:
+        raise InputError("calibrate", "pixel_model", f"one of {', '.join(PIXEL_MODELS)}",
+                         repr(opts.pixel_model))
+    hot = spatial_hot_pixels(events, opts.hot_factor, opts.hot_floor)
+    chan = pixel_channels(events)
+    names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS
+    floor = interval_floor(events, opts.dead_time_jump)
+    if opts.pixel_model != "auto":
+        models = [opts.pixel_model]
+    else:  # a floor without a step may be a reset pixel's, or only the scene's fastest edge
+        models = ["step", "reset"] if floor.onset_us > 0 and len(frames) >= 2 else ["step"]
+    lin = frames.to_linear() if len(frames) >= 2 else None
+    fits = {}
+    for m in models:
+        try:
+            fits[m] = _model_fit(frames, lin, events, hot, chan, names, opts, m == "reset",
+                                 floor.onset_us if m == "reset" else floor.step_us)
+        except InputError:
+            if len(models) == 1 or m == "step":
+                raise
+    agree = {m: fit["agreement"] for m, fit in fits.items()}
+    model = "reset" if agree.get("reset", -np.inf) > agree.get("step", -np.inf) else models[0]
+    fit = fits[model]
+    ratio = fit["ratio"]
+    details = {"hot_pixels": int(hot.sum()), "events": int(len(events)), "frames": int(len(frames)),
+               "ratio_from_event_balance": [r["ratio"] for r in ratio], "dead_time_us": fit["dead"],
+               "pixel_model": model + (" (auto)" * (opts.pixel_model == "auto")),
+               "pixel_model_agreement": agree,
+               "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us}}
+    if model == "reset":
+        details["reset_weight_cap"] = opts.reset_weight_cap
+    if len(frames) < 2:
+        return _without_pairs(frames, events, names, ratio, opts, details)
+    per, var, n_spread = fit["per"], fit["var"], fit["n_spread"]
+    details.update({"refractory_gap_us": fit["gap"], "per_channel": per, "n_samples": opts.n_samples})
+    tp, sp, tn, sn = (np.array(fit[k]) for k in ("tp", "sp", "tn", "sn"))
     failed = failed_channels(tp, tn, opts.theta_range)
     if failed.all():
         details["per_channel"] = per
@@ -430,16 +502,21 @@ def failed_channels(theta_pos: np.ndarray, theta_neg: np.ndarray, theta_range: t
 
 
 def _compact(counts: np.ndarray) -> np.ndarray:
-    """int16 when every count fits (half the memory of a 1280x720 sensor's [M, 2, H*W] counts)."""
+    """int16 when every count fits (half the memory of a 1280x720 sensor's [M, 2, H*W] counts);
+    weighted (float) counts stay as they are."""
+    if counts.dtype.kind == "f":
+        return counts
     if counts.size and int(np.abs(counts).max()) < np.iinfo(np.int16).max:
         return counts.astype(np.int16)
     return counts
 
 
 def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch: int,
-                   opts: CalibrateOptions, rng: np.random.Generator) -> list[dict]:
-    """Per channel ``theta_- / theta_+ = sum N_+ / sum N_-`` with a tile-bootstrap uncertainty."""
-    cm = events.count_maps().reshape(2, -1).astype(np.float64)
+                   opts: CalibrateOptions, rng: np.random.Generator,
+                   weights: np.ndarray | None = None) -> list[dict]:
+    """Per channel ``theta_- / theta_+ = sum N_+ / sum N_-`` with a tile-bootstrap uncertainty
+    (``N`` the events' ``weights`` summed when given)."""
+    cm = events.count_maps(weights=weights).reshape(2, -1).astype(np.float64)
     tid = tile_ids(np.arange(cm.shape[1]), events.width, opts.tile)
     out = []
     for c in range(n_ch):

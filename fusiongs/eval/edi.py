@@ -59,14 +59,16 @@ def threshold_maps(theta, cfa: str | None, height: int, width: int):
     return th.theta_pos[ch], th.theta_neg[ch]
 
 
-def event_count_samples(events: EventStream, t_start: float, t_end: float, n_samples: int
-                        ) -> np.ndarray:
+def event_count_samples(events: EventStream, t_start: float, t_end: float, n_samples: int,
+                        weights: np.ndarray | None = None) -> np.ndarray:
     """ON/OFF event counts from mid-exposure to each sample instant.
 
     Args:
         events: time-sorted stream (µs).
         t_start, t_end: exposure window in seconds.
         n_samples: number of instants ``M``.
+        weights: optional ``[E]`` per-event weights (the crossings each event stands for,
+            :func:`fusiongs.events.stats.reset_weights`): the counts are then their float32 sums.
 
     Returns:
         ``[M, 2, H, W]`` int32 ``N_pm(t_k) - N_pm(t_mid)`` (channel 0 ON, 1 OFF): negative before
@@ -84,9 +86,12 @@ def event_count_samples(events: EventStream, t_start: float, t_end: float, n_sam
     mid = 0.5 * (s_us + e_us)
     i0, i1 = events.index_range(int(np.floor(s_us)), int(np.ceil(e_us)) + 1)
     hw = events.height * events.width
-    out = np.zeros((n_samples, 2 * hw), np.int32)
-    exposure_counts(events.t[i0:i1], events.x[i0:i1], events.y[i0:i1], events.p[i0:i1], events.width,
-                    hw, ts, mid, out)
+    if weights is None:
+        out, w = np.zeros((n_samples, 2 * hw), np.int32), np.ones(1, np.int32)
+    else:
+        out, w = np.zeros((n_samples, 2 * hw), np.float32), np.asarray(weights[i0:i1], np.float32)
+    exposure_counts(events.t[i0:i1], events.x[i0:i1], events.y[i0:i1], events.p[i0:i1], w,
+                    events.width, hw, ts, mid, out)
     return out.reshape(n_samples, 2, events.height, events.width)
 
 

@@ -21,10 +21,12 @@ def _slot(x, y, p, width, hw):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def count_events(x, y, p, width, hw, out):  # pragma: no cover - numba
-    """Add every event to ``out`` ``[2 * hw]`` (ON at ``y W + x``, OFF at ``hw + y W + x``)."""
+def count_events(x, y, p, w, width, hw, out):  # pragma: no cover - numba
+    """Add every event to ``out`` ``[2 * hw]`` (ON at ``y W + x``, OFF at ``hw + y W + x``): ``w[i]``
+    (``w`` of the events' length) or ``w[0]`` (``w`` of length 1)."""
+    each = w.shape[0] == x.shape[0]
     for i in range(x.shape[0]):
-        out[_slot(x[i], y[i], p[i], width, hw)] += 1
+        out[_slot(x[i], y[i], p[i], width, hw)] += w[i] if each else w[0]
 
 
 @njit(cache=True)
@@ -67,6 +69,22 @@ def fast_mask(t, x, y, width, hw, gap, out):  # pragma: no cover - numba
 
 
 @njit(cache=True)
+def reset_weights(t, x, y, width, hw, dead, cap, out):  # pragma: no cover - numba
+    """``out[i]`` = ``min(dt / (dt - dead), cap)`` for event ``i`` ``dt`` µs after its pixel's
+    previous event with ``dt > dead``; left as it is (1) otherwise."""
+    last = np.zeros(hw, np.int64)
+    seen = np.zeros(hw, np.bool_)
+    for i in range(t.shape[0]):
+        k = np.int64(y[i]) * width + np.int64(x[i])
+        if seen[k]:
+            dt = float(t[i] - last[k])
+            if dt > dead:
+                out[i] = min(dt / (dt - dead), cap)
+        last[k] = t[i]
+        seen[k] = True
+
+
+@njit(cache=True)
 def fast_counts(t, x, y, width, hw, gap, edges, out):  # pragma: no cover - numba
     """Add each fast event (as :func:`fast_mask`) to ``out[j, pixel]`` of its segment
     ``edges[j] <= t < edges[j + 1]`` (``out`` ``[len(edges) - 1, hw]``; outside: not counted)."""
@@ -85,19 +103,22 @@ def fast_counts(t, x, y, width, hw, gap, edges, out):  # pragma: no cover - numb
 
 
 @njit(cache=True)
-def exposure_counts(t, x, y, p, width, hw, ts, t_mid, out):  # pragma: no cover - numba
+def exposure_counts(t, x, y, p, w, width, hw, ts, t_mid, out):  # pragma: no cover - numba
     """``out[k, q]`` ``[M, 2 * hw]`` (zeroed) becomes the count of events of slot ``q`` (ON at the
     pixel, OFF at ``hw`` + pixel) in ``[t_mid, ts[k])``, negative for ``ts[k] < t_mid``: the
-    events of the window, each counted where ``ts[k] > t``, less those before ``t_mid``."""
+    events of the window, each counted where ``ts[k] > t``, less those before ``t_mid``. Each
+    event adds ``w[i]`` (``w`` of the window's length) or ``w[0]`` (``w`` of length 1)."""
     m = ts.shape[0]
     at_mid = np.zeros(out.shape[1], out.dtype)
+    each = w.shape[0] == t.shape[0]
     for i in range(t.shape[0]):
         k = _slot(x[i], y[i], p[i], width, hw)
+        wi = w[i] if each else w[0]
         b = np.searchsorted(ts, t[i], side="right")  # the event counts for samples >= b
         if b < m:
-            out[b, k] += 1
+            out[b, k] += wi
         if t[i] < t_mid:
-            at_mid[k] += 1
+            at_mid[k] += wi
     for b in range(1, m):
         out[b] += out[b - 1]
     for b in range(m):

@@ -9,13 +9,16 @@ import numpy as np
 from fusiongs.events.stream import EventStream
 
 
-def count_maps(events: EventStream, i0: int = 0, i1: int | None = None) -> np.ndarray:
-    """``[2, H, W]`` int64 ON / OFF counts of the events ``[i0, i1)`` (a bincount)."""
+def count_maps(events: EventStream, i0: int = 0, i1: int | None = None,
+               weights: np.ndarray | None = None) -> np.ndarray:
+    """``[2, H, W]`` ON / OFF counts of the events ``[i0, i1)`` (a bincount; int64, or float64
+    sums of ``weights[i0:i1]``)."""
     i1 = len(events) if i1 is None else i1
     hw = events.height * events.width
     idx = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
     idx += (events.p[i0:i1] < 0) * hw
-    return np.bincount(idx, minlength=2 * hw).reshape(2, events.height, events.width)
+    w = None if weights is None else np.asarray(weights[i0:i1], np.float64)
+    return np.bincount(idx, w, minlength=2 * hw).reshape(2, events.height, events.width)
 
 
 def same_pixel_intervals(events: EventStream) -> tuple[np.ndarray, np.ndarray]:
@@ -31,6 +34,17 @@ def same_pixel_intervals(events: EventStream) -> tuple[np.ndarray, np.ndarray]:
 def interval_histogram(events: EventStream, edges: np.ndarray) -> tuple[np.ndarray, int]:
     dt, _ = same_pixel_intervals(events)
     return np.histogram(dt, edges)[0], int(dt.size)
+
+
+def reset_weights(events: EventStream, dead_us: float, cap: float) -> np.ndarray:
+    """``[E]`` float64 ``min(dt / (dt - d), cap)`` where the interval ``dt`` to the pixel's previous
+    event exceeds ``d``, else 1."""
+    w = np.ones(len(events))
+    dt, idx = same_pixel_intervals(events)
+    dt = dt.astype(np.float64)
+    over = dt > dead_us
+    w[idx[over]] = np.minimum(dt[over] / (dt[over] - dead_us), cap)
+    return w
 
 
 def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
@@ -51,15 +65,19 @@ def fast_event_counts(events: EventStream, gap_us: float, edges_us: np.ndarray) 
     return out
 
 
-def exposure_counts(events: EventStream, ts: np.ndarray, mid: float, i0: int, i1: int) -> np.ndarray:
-    """``[M, 2, H, W]`` int32 counts of :func:`fusiongs.eval.edi.event_count_samples`: a bincount
-    over (sample bin, polarity, pixel), a cumulative sum over the bins, less the counts at mid."""
+def exposure_counts(events: EventStream, ts: np.ndarray, mid: float, i0: int, i1: int,
+                    weights: np.ndarray | None = None) -> np.ndarray:
+    """``[M, 2, H, W]`` counts of :func:`fusiongs.eval.edi.event_count_samples` (int32, or float64
+    sums of ``weights[i0:i1]``): a bincount over (sample bin, polarity, pixel), a cumulative sum
+    over the bins, less the counts at mid."""
     t = events.t[i0:i1]
     hw, m = events.height * events.width, len(ts)
     pix = events.y[i0:i1].astype(np.int64) * events.width + events.x[i0:i1]
     pix += (events.p[i0:i1] < 0) * hw
+    w = None if weights is None else np.asarray(weights[i0:i1], np.float64)
     b = np.searchsorted(ts, t, side="right")  # the event counts for samples k >= b
-    hist = np.bincount(b * (2 * hw) + pix, minlength=(m + 1) * 2 * hw)
+    hist = np.bincount(b * (2 * hw) + pix, w, minlength=(m + 1) * 2 * hw)
     cum = np.cumsum(hist.reshape(m + 1, 2 * hw)[:m], axis=0)
-    at_mid = np.bincount(pix[t < mid], minlength=2 * hw)
-    return (cum - at_mid).astype(np.int32).reshape(m, 2, events.height, events.width)
+    at_mid = np.bincount(pix[t < mid], None if w is None else w[t < mid], minlength=2 * hw)
+    out = (cum - at_mid).reshape(m, 2, events.height, events.width)
+    return out if w is not None else out.astype(np.int32)

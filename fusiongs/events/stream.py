@@ -126,25 +126,34 @@ class EventStream:
         return EventStream(self.t[i0:i1], self.x[i0:i1], self.y[i0:i1], self.p[i0:i1],
                            self.width, self.height, self.cfa)
 
-    def count_maps(self, t0_us: int | None = None, t1_us: int | None = None) -> np.ndarray:
+    def count_maps(self, t0_us: int | None = None, t1_us: int | None = None,
+                   weights: np.ndarray | None = None) -> np.ndarray:
         """Per-pixel event counts ``[2, H, W]`` int32: channel 0 = ON (+1), 1 = OFF (-1) events.
 
-        Counts the events in ``[t0_us, t1_us)`` (the whole stream when both are ``None``).
+        Counts the events in ``[t0_us, t1_us)`` (the whole stream when both are ``None``). With
+        ``weights`` (``[E]``, one per event of the stream) the float64 sums of the weights instead.
         """
         lo = np.iinfo(np.int64).min if t0_us is None else t0_us
         hi = np.iinfo(np.int64).max if t1_us is None else t1_us
         i0, i1 = self.index_range(lo, hi)
+        if weights is not None:
+            if len(weights) != len(self):
+                raise InputError("count_maps", "weights", f"{len(self)} weights, one per event", len(weights))
+            w = np.asarray(weights[i0:i1], np.float64)
+            return self._counts(i0, i1, w).reshape(2, self.height, self.width)
         return self._counts(i0, i1).astype(np.int32).reshape(2, self.height, self.width)
 
-    def _counts(self, i0: int, i1: int) -> np.ndarray:
-        """``[2 * H * W]`` int64 ON then OFF counts of the events ``[i0, i1)`` (one pass, no
-        per-event temporaries: :func:`fusiongs.events._kernels.count_events`)."""
+    def _counts(self, i0: int, i1: int, weights: np.ndarray | None = None) -> np.ndarray:
+        """``[2 * H * W]`` int64 ON then OFF counts of the events ``[i0, i1)``, or float64 sums of
+        their ``weights`` (one pass, no per-event temporaries:
+        :func:`fusiongs.events._kernels.count_events`)."""
         from fusiongs.events._kernels import count_events
 
         hw = self.height * self.width
-        out = np.zeros(2 * hw, np.int64)
+        out = np.zeros(2 * hw, np.int64 if weights is None else np.float64)
+        w = np.ones(1, np.int64) if weights is None else weights
         if i1 > i0:
-            count_events(self.x[i0:i1], self.y[i0:i1], self.p[i0:i1], self.width, hw, out)
+            count_events(self.x[i0:i1], self.y[i0:i1], self.p[i0:i1], w, self.width, hw, out)
         return out
 
     def signed_count_map(self, t0_us: int | None = None, t1_us: int | None = None) -> np.ndarray:

@@ -54,6 +54,7 @@ class TrainData:
     pvc: torch.Tensor | None = None  # [R, H, W] float32 photovoltage V(t)/θ0 (count units)
     event_index: torch.Tensor | None = None  # [E] int32 flat (polarity, pixel) index, on the device
     fast: torch.Tensor | None = None  # [E] bool: a fast event (censored counts), on the device
+    event_weight: torch.Tensor | None = None  # [E] float32 crossings per event (reset pixel), or None
     hot: torch.Tensor | None = None  # [H, W] bool hot pixels (train/lowpass_term.py), on the device
     lowpass_support: tuple[float, torch.Tensor] | None = None  # (sigma, [C, H, W]) lowpass_term.py
 
@@ -76,7 +77,8 @@ class TrainData:
         return int(self.targets.shape[0])
 
     def count_maps(self, t_a: float, t_b: float, device: torch.device) -> torch.Tensor:
-        """``[2, H, W]`` float32 counts of (+, −) events with ``t_a <= t < t_b`` (seconds).
+        """``[2, H, W]`` float32 counts of (+, −) events with ``t_a <= t < t_b`` (seconds), each
+        event counted ``event_weight`` times when set (a reset pixel's crossings).
 
         The window's index range comes from a binary search of the host timestamps; the counting
         is an ``index_add`` on ``event_index``'s device (no host copy, no synchronisation).
@@ -84,7 +86,7 @@ class TrainData:
         if self.events is None:
             raise RuntimeError("count_maps needs events (TrainData.events is None)")
         h, w = self.events.height, self.events.width
-        return self._window_sum(t_a, t_b, device).reshape(2, h, w).to(device)
+        return self._window_sum(t_a, t_b, device, self.event_weight).reshape(2, h, w).to(device)
 
     def _window_sum(self, t_a: float, t_b: float, device: torch.device,
                     weights: torch.Tensor | None = None) -> torch.Tensor:
@@ -109,7 +111,8 @@ class TrainData:
 
         Returns:
             ``(counts [K, 2, H*W], fast [K, H*W] | None)`` float32 on ``device``: the (+, −)
-            events with ``times[0] <= t < times[k]``, and the fast events (:func:`fast_events`)
+            events with ``times[0] <= t < times[k]`` (``event_weight`` each when set), and the
+            fast events (:func:`fast_events`)
             of either polarity among them (None when none were marked); row 0 is zero. Row ``b``
             minus row ``a`` is :meth:`count_maps` ``(times[a], times[b])`` exactly (integer sums
             in float32), and the fast row difference is :meth:`censored_map`'s sum before its
@@ -121,7 +124,7 @@ class TrainData:
             raise RuntimeError("cumulative_counts needs events (TrainData.events is None)")
         h, w = self.events.height, self.events.width
         segments = list(zip(times[:-1], times[1:]))  # each segment's events once, into its own row
-        maps = [[self._window_sum(a, b, device) for a, b in segments]]
+        maps = [[self._window_sum(a, b, device, self.event_weight) for a, b in segments]]
         if self.fast is not None:
             maps.append([self._window_sum(a, b, device, self.fast) for a, b in segments])
         rows = []

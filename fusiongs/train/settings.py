@@ -111,6 +111,9 @@ class EventSettings:
     censor: float = 2.0              # counts of pixels with two events closer than this multiple of
                                      # the estimated dead time are lower bounds (one-sided mse); 0 off
     censor_radius: int = 0           # ... and those of their neighbours within this many pixels
+    reset_weights: bool = True       # where the calibration found a pixel held in reset (its
+                                     # pixel_model "reset"), each event counts the crossings it
+                                     # stands for, as the calibration counted them
     lowpass_weight: float = 0.0      # weight of the low-pass term on long windows between the free
                                      # windows' ends (train/lowpass_term.py; scenes without frames,
                                      # where nothing else fixes large scales); 0 off

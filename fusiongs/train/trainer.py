@@ -209,6 +209,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                                               eo.intensity_tau, cfg.threshold.init, device)
     if cfg.events.censor > 0 and data.events is not None:
         data.fast = censor_events(data, cfg, theta0, device)
+    if cfg.events.reset_weights and data.events is not None:
+        data.event_weight = reset_event_weights(data, theta0, device)
     if cfg.events.loss == "pvc" and data.events is not None:
         data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg)
@@ -404,6 +406,23 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     if dead <= 0:
         return None
     return fast_events(data.events, cfg.events.censor * float(dead), device)
+
+
+def reset_event_weights(data: TrainData, theta0: SensorThresholds, device: torch.device
+                        ) -> torch.Tensor | None:
+    """``[E]`` float32 crossings each event stands for on ``device``
+    (:func:`~fusiongs.events.stats.reset_weights`), where the calibration chose the pixel model of
+    a pixel held in reset (its details' ``pixel_model``, ``dead_time_us`` and
+    ``reset_weight_cap``); None otherwise, and the events count once each."""
+    from fusiongs.events.stats import reset_weights
+
+    d = theta0.details
+    model, dead, cap = d.get("pixel_model"), d.get("dead_time_us"), d.get("reset_weight_cap", 4.0)
+    if not (isinstance(model, str) and model.startswith("reset")):
+        return None
+    if isinstance(dead, bool) or not isinstance(dead, int | float) or not math.isfinite(dead) or dead <= 0:
+        return None
+    return torch.from_numpy(reset_weights(data.events, float(dead), float(cap))).to(device)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

@@ -425,3 +425,37 @@ def test_calibration_json_is_strict_json(tmp_path, grey_asym):
 
     doc = json.loads(text, parse_constant=refuse)
     assert doc["thresholds"]["details"]["probe"]["std"] == [None, None, 1.0]
+
+
+def test_pixel_models_auto_fits_both_and_keeps_the_one_the_frames_agree_with(grey_asym):
+    """The intervals' onset without a step may be a reset pixel's dead time or only the scene's
+    fastest edge: "auto" fits both pixel models and keeps the one whose counts explain the frames'
+    log changes best (the fits' agreement)."""
+    sc = grey_asym.scene
+    auto = estimate_thresholds(sc.frames, sc.events)
+    agree = auto.details["pixel_model_agreement"]
+    assert set(agree) == {"step", "reset"} and auto.details["interval_floor_us"]["onset"] > 0
+    kept = max(agree, key=agree.get)
+    assert auto.details["pixel_model"] == f"{kept} (auto)"
+    forced = {m: estimate_thresholds(sc.frames, sc.events, CalibrateOptions(pixel_model=m))
+              for m in ("step", "reset")}
+    assert forced["reset"].details["dead_time_us"] == auto.details["interval_floor_us"]["onset"]
+    assert forced["step"].details["dead_time_us"] == auto.details["interval_floor_us"]["step"]
+    np.testing.assert_array_equal(auto.theta_pos, forced[kept].theta_pos)
+    # a reset pixel's events stand for more than one crossing each: smaller thresholds
+    assert np.all(forced["reset"].theta_pos < forced["step"].theta_pos)
+    assert list(forced["reset"].details["pixel_model_agreement"]) == ["reset"]
+    # without frames nothing can tell them apart: the counts are taken as they are
+    none = estimate_thresholds(FrameSet.empty(sc.events.height, sc.events.width), sc.events)
+    assert none.details["pixel_model"] == "step (auto)"
+    with pytest.raises(InputError, match="pixel_model"):
+        estimate_thresholds(sc.frames, sc.events, CalibrateOptions(pixel_model="grid"))
+
+
+def test_cli_pixel_model(grey_dir, tmp_path, capsys):
+    assert main(["calibrate", str(grey_dir), "-o", str(tmp_path / "r.json"), "--pixel-model", "reset"]) == 0
+    assert "pixel model: reset" in capsys.readouterr().out
+    doc = json.loads((tmp_path / "r.json").read_text())
+    assert doc["thresholds"]["details"]["pixel_model"] == "reset"
+    with pytest.raises(SystemExit):
+        main(["calibrate", str(grey_dir), "--pixel-model", "grid"])

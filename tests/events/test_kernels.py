@@ -89,3 +89,49 @@ def test_exposure_counts_match_the_bincount(seed, window):
     i0, i1 = ev.index_range(int(np.floor(s_us)), int(np.ceil(e_us)) + 1)
     np.testing.assert_array_equal(event_count_samples(ev, s, e, m),
                                   ref.exposure_counts(ev, ts, 0.5 * (s_us + e_us), i0, i1))
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("dead", [0.0, 1.0, 40.0, 333.5])
+def test_reset_weights_match_the_sorted_pixel_intervals(seed, dead):
+    from fusiongs.events.stats import reset_weights
+
+    ev = _stream(3000, seed)
+    w = reset_weights(ev, dead, cap=4.0)
+    assert w.dtype == np.float32 and w.shape == (len(ev),)
+    np.testing.assert_allclose(w, ref.reset_weights(ev, dead, 4.0) if dead > 0 else np.ones(len(ev)),
+                               rtol=1e-6)
+    if dead > 0:
+        assert (w >= 1).all() and (w <= 4).all() and (w > 1).any()
+
+
+def test_a_reset_weight_is_the_crossings_at_a_steady_rate():
+    """One pixel firing every d + theta / r: each event after the first stands for (theta + r d) / theta."""
+    from fusiongs.events.stats import reset_weights
+
+    d, gap = 500.0, 250.0  # dead time and time to a threshold after the release (µs): r d = 2 theta
+    t = np.arange(6, dtype=np.int64) * int(d + gap)
+    ev = EventStream(t, np.zeros(6, np.uint16), np.zeros(6, np.uint16), np.ones(6, np.int8), 1, 1)
+    np.testing.assert_allclose(reset_weights(ev, d, cap=10.0), [1, 3, 3, 3, 3, 3])
+    np.testing.assert_allclose(reset_weights(ev, d, cap=2.5), [1, 2.5, 2.5, 2.5, 2.5, 2.5])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_weighted_counts_match_the_bincount(seed):
+    from fusiongs.eval.edi import event_count_samples
+
+    ev = _stream(4000, seed)
+    w = np.random.default_rng(seed).uniform(1.0, 4.0, len(ev)).astype(np.float32)
+    np.testing.assert_allclose(ev.count_maps(weights=w), ref.count_maps(ev, weights=w), rtol=1e-6)
+    i0, i1 = ev.index_range(5000, 12000)
+    np.testing.assert_allclose(ev.count_maps(5000, 12000, w), ref.count_maps(ev, i0, i1, w), rtol=1e-6)
+    np.testing.assert_array_equal(ev.count_maps(weights=np.ones(len(ev))), ev.count_maps())
+    s, e, m = 0.001, 0.009, 9
+    ts = s * 1e6 + (np.arange(m) + 0.5) / m * (e - s) * 1e6
+    i0, i1 = ev.index_range(int(np.floor(s * 1e6)), int(np.ceil(e * 1e6)) + 1)
+    got = event_count_samples(ev, s, e, m, w)
+    assert got.dtype == np.float32
+    want = ref.exposure_counts(ev, ts, 0.5e6 * (s + e), i0, i1, w)
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-3)
+    with pytest.raises(Exception, match="weights"):
+        ev.count_maps(weights=w[:-1])

@@ -56,6 +56,7 @@ HOST_SIDE = {
     ("fusiongs/train/data.py", "fast_events"): "numpy -> tensor, once (the censored counts' events)",
     ("fusiongs/train/lowpass_term.py", "hot_map"): "numpy -> tensor, once (then .to(device))",
     ("fusiongs/train/trainer.py", "init_images"): "numpy -> tensor for the host stereo, once",
+    ("fusiongs/train/trainer.py", "reset_event_weights"): "numpy -> tensor, once (then .to(device))",
     ("fusiongs/losses/colour.py", "cfa_index"): "numpy -> tensor, once (then .to(device))",
     # checkpoints hold host tensors by definition (written every checkpoint_every iterations)
     ("fusiongs/train/checkpoint.py", "*"): "serialisation",

@@ -1,0 +1,67 @@
+"""A reset pixel's events counted as the crossings they stand for in training, as the calibration
+counted them (``events.reset_weights``; :func:`fusiongs.train.trainer.reset_event_weights`)."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import torch
+
+from fusiongs.events.stats import reset_weights
+from fusiongs.events.thresholds import SensorThresholds
+from fusiongs.io.scene_io import load_scene
+from fusiongs.sim.dvs import DVSParams
+from fusiongs.sim.simulate import SimConfig, run_simulation
+from fusiongs.sim.write import write_simulated_scene
+from fusiongs.train.data import prepare_data
+from fusiongs.train.trainer import reset_event_weights
+
+CPU = torch.device("cpu")
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    root = tmp_path_factory.mktemp("reset") / "scene"
+    cfg = SimConfig(preset="wall", width=32, height=24, duration=0.15, frames=2, novel=0,
+                    dvs_rate_hz=2000.0, blur_samples=4, supersample=1, seed=3,
+                    dvs=DVSParams(refractory_s=4e-4, refractory_reset=True))
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, root, overwrite=True)
+    return prepare_data(load_scene(root), CPU, True)
+
+
+def _theta(**details) -> SensorThresholds:
+    th = SensorThresholds.uniform(0.2, 0.25)
+    return SensorThresholds(th.channels, th.theta_pos, th.theta_neg, th.std_pos, th.std_neg, True,
+                            "test", details)
+
+
+def test_only_a_reset_calibration_weighs_the_events(data):
+    assert reset_event_weights(data, _theta(), CPU) is None
+    assert reset_event_weights(data, _theta(pixel_model="step (auto)", dead_time_us=400.0), CPU) is None
+    assert reset_event_weights(data, _theta(pixel_model="reset", dead_time_us=0.0), CPU) is None
+    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0)
+    w = reset_event_weights(data, th, CPU)
+    assert w.dtype == torch.float32 and w.device == CPU and w.shape == (len(data.events),)
+    np.testing.assert_array_equal(w.numpy(), reset_weights(data.events, 400.0, 3.0))
+    assert float(w.max()) > 1.0 and float(w.max()) <= 3.0
+
+
+def test_weighted_counts_in_every_window_and_their_cumulative_sums(data):
+    data.event_weight = reset_event_weights(data, _theta(pixel_model="reset", dead_time_us=400.0), CPU)
+    try:
+        t0, t1 = data.t_range
+        times = [t0, t0 + 0.3 * (t1 - t0), t0 + 0.55 * (t1 - t0), t1]
+        counts, _ = data.cumulative_counts(times, CPU)
+        w = data.event_weight.numpy()
+        for a, b in itertools.combinations(range(len(times)), 2):
+            got = data.count_maps(times[a], times[b], CPU)
+            want = data.events.count_maps(int(round(times[a] * 1e6)), int(round(times[b] * 1e6)), w)
+            np.testing.assert_allclose(got.numpy(), want, rtol=1e-5, atol=1e-4)
+            torch.testing.assert_close(counts[b] - counts[a], got.reshape(2, -1), rtol=1e-5, atol=1e-3)
+        plain = data.events.count_maps(int(round(t0 * 1e6)), int(round(t1 * 1e6)))
+        assert float(counts[-1].sum()) > plain.sum()  # fast events stand for more than one crossing
+    finally:
+        data.event_weight = None
