@@ -453,7 +453,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     details = {"hot_pixels": int(hot.sum()), "events": int(len(events)), "frames": int(len(frames)),
                "ratio_from_event_balance": [r["ratio"] for r in ratio], "dead_time_us": fit["dead"],
                "pixel_model": model + (" (auto)" * (opts.pixel_model == "auto")),
-               "pixel_model_agreement": agree,
+               "pixel_model_agreement": {m: a if np.isfinite(a) else None for m, a in agree.items()},
                "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us}}
     if model == "reset":
         details["reset_weight_cap"] = opts.reset_weight_cap

@@ -89,7 +89,7 @@ def event_count_samples(events: EventStream, t_start: float, t_end: float, n_sam
     if weights is None:
         out, w = np.zeros((n_samples, 2 * hw), np.int32), np.ones(1, np.int32)
     else:
-        out, w = np.zeros((n_samples, 2 * hw), np.float32), np.asarray(weights[i0:i1], np.float32)
+        out, w = np.zeros((n_samples, 2 * hw), np.float32), np.asarray(weights)[i0:i1]
     exposure_counts(events.t[i0:i1], events.x[i0:i1], events.y[i0:i1], events.p[i0:i1], w,
                     events.width, hw, ts, mid, out)
     return out.reshape(n_samples, 2, events.height, events.width)
