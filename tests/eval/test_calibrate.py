@@ -12,7 +12,7 @@ from fusiongs.cli import main
 from fusiongs.errors import InputError
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, refractory_mask
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
-from fusiongs.events.stats import dead_time_us
+from fusiongs.events.stats import IntervalFloor, dead_time_us, interval_floor
 from fusiongs.events.stats import spatial_hot_pixels as hot_pixels
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds, read_calibration, write_calibration
@@ -134,6 +134,7 @@ def test_a_floor_of_the_intervals_far_beyond_any_dead_time_is_not_one():
     ev = _bursts_and_noise(0, np.random.default_rng(3), floor_us=36_000, mean_extra_us=20_000, per_pixel=60)
     assert 30_000 <= dead_time_us(ev, max_us=1e5) <= 36_000  # the step is there ...
     assert dead_time_us(ev) == 0.0  # ... and is not taken for a dead time
+    assert interval_floor(ev) == IntervalFloor(0.0, 0.0)  # nor for a reset pixel's onset
 
 
 def test_dead_time_is_found_under_heavy_background_activity():
