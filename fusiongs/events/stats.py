@@ -231,8 +231,11 @@ class IntervalFloor:
 
     @property
     def reset(self) -> bool:
-        """The density rises from its floor without a step, or steps only above it: a pixel
-        held in reset during its dead time (see :func:`interval_floor`)."""
+        """The density rises from its floor without a step, or steps only above it: the shape a
+        pixel held in reset during its dead time makes (see :func:`interval_floor`), but also a
+        scene whose fastest edge sets the floor; the intervals alone cannot tell the two apart
+        (``fusiongs calibrate`` asks the frames, :class:`~fusiongs.eval.calibrate.CalibrateOptions`
+        ``pixel_model``)."""
         return self.onset_us > 0 and (self.step_us == 0 or self.step_us > self.onset_us)
 
     @property
