@@ -20,7 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="how the pixels lose events in their dead time: reset (a DVS pixel held "
                              "in reset: each event weighted by the crossings it stands for), step "
                              "(the reference level keeps every crossing: fast pixels gated only), or "
-                             "auto: told from the intervals between a pixel's events (default)")
+                             "auto: both fitted, the one whose counts agree better with the frames "
+                             "kept (step without frames; default)")
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
@@ -74,8 +75,8 @@ def run(args: argparse.Namespace) -> int:
               if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
     if str(th.details.get("pixel_model", "")).startswith("reset") and dead:
-        print("pixel model: reset (the intervals rise from their floor without a step): each event "
-              "counted as the threshold crossings it stands for, interval / (interval - dead time)")
+        print("pixel model: reset (held in reset during its dead time): each event counted as the "
+              "threshold crossings it stands for, interval / (interval - dead time)")
     spread = th.details.get("threshold_spread")
     if isinstance(spread, dict):
         sd = [float(v) ** 0.5 for v in spread["log_variance"]]

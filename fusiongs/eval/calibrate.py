@@ -129,8 +129,8 @@ class CalibrateOptions:
             histogram, fast pixel pairs are gated), ``"reset"`` (a DVS pixel held in reset: the
             dead time is the onset of the intervals and every event counts
             :func:`~fusiongs.events.stats.reset_weights` crossings, the gate kept), or ``"auto"``:
-            reset where the intervals rise from their floor without a step
-            (:class:`~fusiongs.events.stats.IntervalFloor`).
+            with two frames or more and an onset, both are fitted and the one whose counts agree
+            better with the frames is kept; otherwise ``"step"``.
         reset_weight_cap: the largest weight of one event on a reset pixel.
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision

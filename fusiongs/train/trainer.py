@@ -400,8 +400,8 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     from fusiongs.events.stats import dead_time_us
     from fusiongs.train.data import fast_events
 
-    dead = theta0.details.get("dead_time_us")  # a calibration.json may come from elsewhere
-    if isinstance(dead, bool) or not isinstance(dead, int | float) or not math.isfinite(dead):
+    dead = _detail_number(theta0, "dead_time_us")  # a calibration.json may come from elsewhere
+    if dead is None:
         dead = dead_time_us(data.events)
     if dead <= 0:
         return None
@@ -413,16 +413,32 @@ def reset_event_weights(data: TrainData, theta0: SensorThresholds, device: torch
     """``[E]`` float32 crossings each event stands for on ``device``
     (:func:`~fusiongs.events.stats.reset_weights`), where the calibration chose the pixel model of
     a pixel held in reset (its details' ``pixel_model``, ``dead_time_us`` and
-    ``reset_weight_cap``); None otherwise, and the events count once each."""
+    ``reset_weight_cap``); None otherwise, and the events count once each. A reset calibration
+    whose dead time or cap is not a number (a file from elsewhere) is an :class:`InputError`."""
     from fusiongs.events.stats import reset_weights
 
-    d = theta0.details
-    model, dead, cap = d.get("pixel_model"), d.get("dead_time_us"), d.get("reset_weight_cap", 4.0)
+    model = theta0.details.get("pixel_model")
     if not (isinstance(model, str) and model.startswith("reset")):
         return None
-    if isinstance(dead, bool) or not isinstance(dead, int | float) or not math.isfinite(dead) or dead <= 0:
+    dead = _detail_number(theta0, "dead_time_us")
+    cap = _detail_number(theta0, "reset_weight_cap") if "reset_weight_cap" in theta0.details else 4.0
+    if dead is None or dead < 0:
+        raise InputError("calibration", "details.dead_time_us", "a dead time >= 0 (µs) for the reset "
+                         "pixel model", repr(theta0.details.get("dead_time_us")))
+    if cap is None or cap < 1:
+        raise InputError("calibration", "details.reset_weight_cap", "a number >= 1",
+                         repr(theta0.details.get("reset_weight_cap")))
+    if dead == 0:
         return None
-    return torch.from_numpy(reset_weights(data.events, float(dead), float(cap))).to(device)
+    return torch.from_numpy(reset_weights(data.events, dead, cap)).to(device)
+
+
+def _detail_number(theta0: SensorThresholds, key: str) -> float | None:
+    """``theta0.details[key]`` as a float when it is a finite number (not a bool), else None."""
+    v = theta0.details.get(key)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        return None
+    return float(v)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

@@ -65,3 +65,17 @@ def test_weighted_counts_in_every_window_and_their_cumulative_sums(data):
         assert float(counts[-1].sum()) > plain.sum()  # fast events stand for more than one crossing
     finally:
         data.event_weight = None
+
+
+@pytest.mark.parametrize("details, field", [
+    ({"pixel_model": "reset", "dead_time_us": "400"}, "dead_time_us"),
+    ({"pixel_model": "reset", "dead_time_us": float("nan")}, "dead_time_us"),
+    ({"pixel_model": "reset", "dead_time_us": -5.0}, "dead_time_us"),
+    ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_weight_cap": "x"}, "reset_weight_cap"),
+    ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_weight_cap": 0.5}, "reset_weight_cap"),
+])
+def test_a_reset_calibration_from_elsewhere_with_a_bad_number_is_a_named_error(data, details, field):
+    from fusiongs.errors import InputError
+
+    with pytest.raises(InputError, match=field):
+        reset_event_weights(data, _theta(**details), CPU)
