@@ -41,11 +41,15 @@ does not reach. Under that pixel model each event counts ``Δt / (Δt - d)`` cro
 intervals (:func:`fusiongs.events.stats.interval_floor`). The intervals alone cannot tell such a
 pixel from one whose level keeps every crossing (a scene's fastest edge also makes a floor, and a
 reset pixel on sharp edges also makes a step), so with frames and an onset ``pixel_model="auto"``
-fits both models and keeps the one whose counts explain the frames' log changes best (the higher
+fits both models and keeps the one whose fit explains the frames' log changes best (the higher
 mean agreement over channels, :func:`fusiongs.eval.calibrate_fit.agreement`). Measured on the 173x130
 tuning scenes (RESULTS.md, session 36): it keeps the step model on all 9 default-pixel scenes and
 the reset model on 6 of the 8 scenes simulated again with a reset pixel, whose largest error goes
-from 8.8-39.3 % to 1.1-22.2 % (6 / 8 within 10 %, before 1 / 8).
+from 8.8-39.3 % to 1.1-22.2 % (6 / 8 within 10 %, before 1 / 8). The two fits differ in their gate
+as well as in their counts (the step model gates at the histogram's step, so not at all when it
+has none, as on a reset pixel; the reset model at the onset), and it is mostly the gate that the
+agreement tells apart: with one gate held fixed, weighting the counts lowers the agreement on
+most tuning scenes, the reset pixels' included (RESULTS.md, session 37).
 
 Threshold spread: every fit that adds up pixels' moments weighs a pixel by its event count, i.e.
 by ``1 / theta_p``, and so measures the harmonic mean of the pixels' thresholds, below their mean

@@ -14,7 +14,10 @@ float32 lanes with AVX-512, 8 with AVX2):
   that a division carries no ZeroDivisionError branch;
 - colours live in row buffers laid out ``[D, W]``; three colours (the usual case) are handled in one
   pass over the row (views of the three rows: 2-9 % less time than a pass per channel on the
-  173x130 event-only model, RESULTS.md session 32), other counts one channel at a time;
+  173x130 event-only model, RESULTS.md session 32), other counts one channel at a time; with three
+  colours the forward pass also computes each pixel's alpha in that same pass (7-9 % less forward
+  time, the same images bit for bit; RESULTS.md session 37), while the backward pass keeps its
+  three passes (fused, in full or in part, it was no faster);
 - the forward pass shrinks each row's span to the pixels still below the stop transmittance, and
   the backward pass skips, before any per-pixel work, entries behind the last contributing entry of
   every pixel they cover (most entries of saturated rows).
@@ -86,6 +89,25 @@ def _lane_gauss(mxg, x, ha, bdy, cyy):  # pragma: no cover - numba
     return dx, sigma, exp_neg_f32(sc)
 
 
+@njit(cache=True, inline="always", fastmath={"contract"})
+def _lane_front(mxg, x, ha, bdy, cyy, o, xe, kk, trow, alive, lrow):  # pragma: no cover - numba
+    """One pixel of an entry in the forward pass: returns ``(alpha T, stop)``, the entry's weight
+    at the pixel (0 where it does not count) and whether the pixel's transmittance stops there;
+    ``trow``, ``alive`` and ``lrow`` are updated in place."""
+    _, sigma, gauss = _lane_gauss(mxg, x, ha, bdy, cyy)
+    alpha = o * gauss
+    alpha = alpha if alpha < F(MAX_A) else F(MAX_A)
+    t = trow[x]
+    nt = t * (F(1.0) - alpha)
+    hit = (x <= xe) & (sigma >= F(0.0)) & (alpha >= F(ALPHA_T)) & (alive[x] > F(0.0))
+    stop = hit & (nt <= F(T_STOP))
+    use = hit & (nt > F(T_STOP))
+    trow[x] = nt if use else t
+    alive[x] = F(0.0) if stop else alive[x]
+    lrow[x] = kk if use else lrow[x]
+    return (alpha * t if use else F(0.0)), stop
+
+
 @njit(cache=True, parallel=True, fastmath={"contract"}, error_model="numpy")
 def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, width,
             img, tfin, last):  # pragma: no cover - numba
@@ -120,34 +142,24 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
             kk = np.int32(k)
             xe = U(x1)
             n_stop = 0
-            for blk in range(U(x0), U(x1 + 1), U(LANES)):
-                for lane in range(U(LANES)):
-                    x = blk + lane
-                    _, sigma, gauss = _lane_gauss(mxg, x, ha, bdy, cyy)
-                    alpha = o * gauss
-                    alpha = alpha if alpha < F(MAX_A) else F(MAX_A)
-                    t = trow[x]
-                    nt = t * (F(1.0) - alpha)
-                    hit = (x <= xe) & (sigma >= F(0.0)) & (alpha >= F(ALPHA_T)) & (alive[x] > F(0.0))
-                    stop = hit & (nt <= F(T_STOP))
-                    use = hit & (nt > F(T_STOP))
-                    wbuf[x] = alpha * t if use else F(0.0)
-                    trow[x] = nt if use else t
-                    alive[x] = F(0.0) if stop else alive[x]
-                    lrow[x] = kk if use else lrow[x]
-                    n_stop += 1 if stop else 0
-            if D == 3:
+            if D == 3:  # one pass: each pixel's alpha and its three colours together
                 c0 = col[c, g, 0]
                 c1 = col[c, g, 1]
                 c2 = col[c, g, 2]
                 for blk in range(U(x0), U(x1 + 1), U(LANES)):
                     for lane in range(U(LANES)):
                         x = blk + lane
-                        w = wbuf[x]
+                        w, stop = _lane_front(mxg, x, ha, bdy, cyy, o, xe, kk, trow, alive, lrow)
+                        n_stop += 1 if stop else 0
                         acc0[x] += w * c0
                         acc1[x] += w * c1
                         acc2[x] += w * c2
             else:
+                for blk in range(U(x0), U(x1 + 1), U(LANES)):
+                    for lane in range(U(LANES)):
+                        x = blk + lane
+                        wbuf[x], stop = _lane_front(mxg, x, ha, bdy, cyy, o, xe, kk, trow, alive, lrow)
+                        n_stop += 1 if stop else 0
                 for d in range(D):
                     cd = col[c, g, d]
                     for blk in range(U(x0), U(x1 + 1), U(LANES)):
