@@ -14,7 +14,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="contrast threshold, or ON and OFF thresholds (default: estimate them as "
                              "`fusiongs calibrate` does)")
     parser.add_argument("--calibration", default=None, metavar="FILE",
-                        help="calibration.json from `fusiongs calibrate` (ON/OFF per channel)")
+                        help="calibration.json from `fusiongs calibrate` (ON/OFF per channel; where it kept "
+                             "the reset pixel model, each event counts the crossings it stands for)")
     parser.add_argument("--samples", type=int, default=32,
                         help="instants the exposure mean is taken over (default 32)")
     parser.add_argument("--bits", type=int, choices=(8, 16), default=8, help="PNG bit depth (default 8)")

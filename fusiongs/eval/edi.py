@@ -25,7 +25,7 @@ from fusiongs.errors import InputError
 from fusiongs.events._kernels import exposure_counts
 from fusiongs.events.cfa import cfa_channel_index, demosaic
 from fusiongs.events.stream import EventStream
-from fusiongs.events.thresholds import SensorThresholds
+from fusiongs.events.thresholds import SensorThresholds, calibration_event_weights
 
 THETA_GRID = tuple(np.round(np.geomspace(0.02, 0.8, 33), 4))
 
@@ -166,7 +166,7 @@ def estimate_theta(frame_linear: np.ndarray, events: EventStream, t_start: float
 
 
 def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_end: float,
-               theta=0.2, n_samples: int = 32) -> np.ndarray:
+               theta=0.2, n_samples: int = 32, weights: np.ndarray | None = None) -> np.ndarray:
     """Sharp mid-exposure image of one blurry frame (EDI, Pan et al., CVPR 2019).
 
     Args:
@@ -176,6 +176,8 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
         theta: contrast threshold, a ``(theta_pos, theta_neg)`` pair, :class:`SensorThresholds`, or
             ``None`` to estimate one symmetric threshold with :func:`estimate_theta`.
         n_samples: instants ``M`` the exposure mean is taken over.
+        weights: optional ``[E]`` crossings each event stands for (a pixel held in reset,
+            :func:`fusiongs.events.thresholds.calibration_event_weights`); None counts each once.
 
     Returns:
         ``[H, W, C]`` float32 linear image at ``(t_start + t_end) / 2`` (not clipped).
@@ -183,11 +185,11 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
     b = _check_frame(frame_linear, events)
     if theta is None:
         theta = estimate_theta(frame_linear, events, t_start, t_end, n_samples)
-    counts = event_count_samples(events, t_start, t_end, n_samples)
+    counts = event_count_samples(events, t_start, t_end, n_samples, weights)
     return (b / edi_ratio(counts, theta, events.cfa)).astype(np.float32)
 
 
-def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
+def edi_scene(scene, theta=None, n_samples: int = 32, reset_weights: bool = True) -> np.ndarray:
     """EDI-deblur every frame of a :class:`~fusiongs.io.scene.Scene`.
 
     Args:
@@ -196,9 +198,17 @@ def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
             channel), or ``None`` to estimate them with the estimator of ``fusiongs calibrate``
             (:func:`fusiongs.eval.calibrate.estimate_thresholds`).
         n_samples: instants per exposure.
+        reset_weights: where the thresholds are a calibration that chose the pixel model of a
+            pixel held in reset, count each event as the crossings it stands for, as the
+            calibration and ``deblur`` do
+            (:func:`fusiongs.events.thresholds.calibration_event_weights`); plain numbers, and
+            calibrations of the step model, count each event once either way.
 
     Returns:
         ``[F, H, W, C]`` float32 linear images at the frames' mid-exposure times.
+
+    Raises:
+        InputError: no events or no frames, or a reset calibration with an invalid dead time.
     """
     if scene.events is None or len(scene.events) == 0:
         raise InputError("edi", "events", "a scene with an event stream", "none")
@@ -209,7 +219,8 @@ def edi_scene(scene, theta=None, n_samples: int = 32) -> np.ndarray:
         from fusiongs.eval.calibrate import estimate_thresholds
 
         theta = estimate_thresholds(fs, scene.events)
+    weights = calibration_event_weights(scene.events, theta) if reset_weights else None
     lin = fs.to_linear()
     out = [edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), theta,
-                      n_samples) for i in range(len(fs))]  # loop over frames, not pixels
+                      n_samples, weights) for i in range(len(fs))]  # loop over frames, not pixels
     return np.stack(out)

@@ -163,3 +163,42 @@ def write_calibration(path: str | Path, thresholds: SensorThresholds, **extra) -
     p = Path(path)
     write_text(p, json.dumps(calibration_document(thresholds, **extra), indent=2) + "\n")
     return p
+
+
+def detail_number(thresholds: SensorThresholds, key: str) -> float | None:
+    """``thresholds.details[key]`` as a float when it is a finite number (not a bool), else None
+    (a calibration.json may come from elsewhere)."""
+    v = thresholds.details.get(key)
+    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+        return None
+    return float(v)
+
+
+def calibration_event_weights(events, thresholds) -> np.ndarray | None:
+    """``[E]`` float32 threshold crossings each event of ``events`` stands for, where the
+    calibration ``thresholds`` chose the pixel model of a pixel held in reset (its details'
+    ``pixel_model``, ``dead_time_us`` and ``reset_weight_cap``;
+    :func:`fusiongs.events.stats.reset_weights`); None otherwise (the events count once each),
+    also for thresholds that are plain numbers.
+
+    Raises:
+        InputError: a reset calibration whose dead time or cap is not a valid number.
+    """
+    from fusiongs.events.stats import reset_weights
+
+    if not isinstance(thresholds, SensorThresholds):
+        return None
+    model = thresholds.details.get("pixel_model")
+    if not (isinstance(model, str) and model.startswith("reset")):
+        return None
+    dead = detail_number(thresholds, "dead_time_us")
+    cap = detail_number(thresholds, "reset_weight_cap") if "reset_weight_cap" in thresholds.details else 4.0
+    if dead is None or dead < 0:
+        raise InputError("calibration", "details.dead_time_us", "a dead time >= 0 (µs) for the reset "
+                         "pixel model", repr(thresholds.details.get("dead_time_us")))
+    if cap is None or cap < 1:
+        raise InputError("calibration", "details.reset_weight_cap", "a number >= 1",
+                         repr(thresholds.details.get("reset_weight_cap")))
+    if dead == 0:
+        return None
+    return reset_weights(events, dead, cap)

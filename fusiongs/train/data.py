@@ -213,17 +213,21 @@ def block_mean(images: torch.Tensor, factor: int) -> torch.Tensor:
     return small.reshape(*lead, h // f, w // f, x.shape[1])
 
 
-def edi_images(scene: Scene, theta, device: torch.device) -> torch.Tensor:
+def edi_images(scene: Scene, theta, device: torch.device, reset_weights: bool = True) -> torch.Tensor:
     """``[F, H, W, 3]`` linear EDI images of the frames.
 
     Args:
         theta: :class:`~fusiongs.events.thresholds.SensorThresholds`, a threshold or an ON/OFF
             pair; 0 or None to estimate them (``fusiongs calibrate``'s estimator).
+        reset_weights: count a reset pixel's events as the crossings they stand for where the
+            calibration chose that model (``events.reset_weights``; see
+            :func:`fusiongs.eval.edi.edi_scene`).
     """
     from fusiongs.eval.edi import edi_scene
 
     e = edi_scene(scene, theta=theta if theta is not None and not (isinstance(theta, float | int)
-                                                                      and theta == 0) else None)
+                                                                      and theta == 0) else None,
+                  reset_weights=reset_weights)
     if e.shape[-1] == 1:
         e = np.repeat(e, 3, axis=-1)
     return torch.from_numpy(np.clip(e, 0.0, None).astype(np.float32)).to(device)

@@ -113,7 +113,8 @@ class EventSettings:
     censor_radius: int = 0           # ... and those of their neighbours within this many pixels
     reset_weights: bool = True       # where the calibration found a pixel held in reset (its
                                      # pixel_model "reset"), each event counts the crossings it
-                                     # stands for, as the calibration counted them
+                                     # stands for, as the calibration counted them (event loss,
+                                     # and the EDI images of the prior and the initialisation)
     lowpass_weight: float = 0.0      # weight of the low-pass term on long windows between the free
                                      # windows' ends (train/lowpass_term.py; scenes without frames,
                                      # where nothing else fixes large scales); 0 off

@@ -11,7 +11,6 @@ densification's refinement steps and what the rasteriser does inside).
 
 from __future__ import annotations
 
-import math
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -24,7 +23,7 @@ import torch
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.errors import ConfigError, InputError
-from fusiongs.events.thresholds import SensorThresholds
+from fusiongs.events.thresholds import SensorThresholds, calibration_event_weights, detail_number
 from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
@@ -202,7 +201,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     wants_edi = cfg.priors.edi_weight > 0 or (cfg.init.method != "random" and data.n_frames >= 2)
     if wants_edi and data.events is not None and data.n_frames:
         # thresholds of the EDI images: configured, else the calibration (reused, not redone)
-        data.edi = edi_images(scene, cfg.priors.edi_theta or theta0, device)
+        data.edi = edi_images(scene, cfg.priors.edi_theta or theta0, device, cfg.events.reset_weights)
     if data.n_frames == 0:  # event-only: the HPF intensity anchor (Event-3DGS)
         eo = cfg.event_only
         data.hpf_times, data.hpf = hpf_images(data.events, data.t_range, eo.hpf_readouts,
@@ -400,7 +399,7 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
     from fusiongs.events.stats import dead_time_us
     from fusiongs.train.data import fast_events
 
-    dead = _detail_number(theta0, "dead_time_us")  # a calibration.json may come from elsewhere
+    dead = detail_number(theta0, "dead_time_us")  # a calibration.json may come from elsewhere
     if dead is None:
         dead = dead_time_us(data.events)
     if dead <= 0:
@@ -410,35 +409,13 @@ def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
 
 def reset_event_weights(data: TrainData, theta0: SensorThresholds, device: torch.device
                         ) -> torch.Tensor | None:
-    """``[E]`` float32 crossings each event stands for on ``device``
-    (:func:`~fusiongs.events.stats.reset_weights`), where the calibration chose the pixel model of
-    a pixel held in reset (its details' ``pixel_model``, ``dead_time_us`` and
-    ``reset_weight_cap``); None otherwise, and the events count once each. A reset calibration
-    whose dead time or cap is not a number (a file from elsewhere) is an :class:`InputError`."""
-    from fusiongs.events.stats import reset_weights
-
-    model = theta0.details.get("pixel_model")
-    if not (isinstance(model, str) and model.startswith("reset")):
-        return None
-    dead = _detail_number(theta0, "dead_time_us")
-    cap = _detail_number(theta0, "reset_weight_cap") if "reset_weight_cap" in theta0.details else 4.0
-    if dead is None or dead < 0:
-        raise InputError("calibration", "details.dead_time_us", "a dead time >= 0 (µs) for the reset "
-                         "pixel model", repr(theta0.details.get("dead_time_us")))
-    if cap is None or cap < 1:
-        raise InputError("calibration", "details.reset_weight_cap", "a number >= 1",
-                         repr(theta0.details.get("reset_weight_cap")))
-    if dead == 0:
-        return None
-    return torch.from_numpy(reset_weights(data.events, dead, cap)).to(device)
-
-
-def _detail_number(theta0: SensorThresholds, key: str) -> float | None:
-    """``theta0.details[key]`` as a float when it is a finite number (not a bool), else None."""
-    v = theta0.details.get(key)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
-        return None
-    return float(v)
+    """``[E]`` float32 crossings each event stands for on ``device``, where the calibration chose
+    the pixel model of a pixel held in reset; None otherwise, and the events count once each
+    (:func:`~fusiongs.events.thresholds.calibration_event_weights`, which EDI uses too). A reset
+    calibration whose dead time or cap is not a number (a file from elsewhere) is an
+    :class:`InputError`."""
+    w = calibration_event_weights(data.events, theta0)
+    return None if w is None else torch.from_numpy(w).to(device)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

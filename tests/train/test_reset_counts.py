@@ -1,5 +1,6 @@
-"""A reset pixel's events counted as the crossings they stand for in training, as the calibration
-counted them (``events.reset_weights``; :func:`fusiongs.train.trainer.reset_event_weights`)."""
+"""A reset pixel's events counted as the crossings they stand for in training and in EDI, as the
+calibration counted them (``events.reset_weights``; :func:`fusiongs.train.trainer.reset_event_weights`,
+:func:`fusiongs.events.thresholds.calibration_event_weights`)."""
 
 from __future__ import annotations
 
@@ -22,14 +23,19 @@ CPU = torch.device("cpu")
 
 
 @pytest.fixture(scope="module")
-def data(tmp_path_factory):
+def scene(tmp_path_factory):
     root = tmp_path_factory.mktemp("reset") / "scene"
     cfg = SimConfig(preset="wall", width=32, height=24, duration=0.15, frames=2, novel=0,
                     dvs_rate_hz=2000.0, blur_samples=4, supersample=1, seed=3,
                     dvs=DVSParams(refractory_s=4e-4, refractory_reset=True))
     res = run_simulation(cfg)
     write_simulated_scene(res.scene, res.gt, root, overwrite=True)
-    return prepare_data(load_scene(root), CPU, True)
+    return load_scene(root)
+
+
+@pytest.fixture(scope="module")
+def data(scene):
+    return prepare_data(scene, CPU, True)
 
 
 def _theta(**details) -> SensorThresholds:
@@ -79,3 +85,28 @@ def test_a_reset_calibration_from_elsewhere_with_a_bad_number_is_a_named_error(d
 
     with pytest.raises(InputError, match=field):
         reset_event_weights(data, _theta(**details), CPU)
+
+
+def test_edi_counts_a_reset_pixels_events_as_the_calibration_did(scene):
+    from fusiongs.eval.edi import edi_deblur, edi_scene
+
+    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0)
+    got = edi_scene(scene, th, n_samples=8)
+    w = reset_weights(scene.events, 400.0, 3.0)
+    fs, lin = scene.frames, scene.frames.to_linear()
+    want = np.stack([edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), th, 8, w)
+                     for i in range(len(fs))])
+    np.testing.assert_array_equal(got, want)
+    plain = edi_scene(scene, th, n_samples=8, reset_weights=False)
+    np.testing.assert_array_equal(plain, edi_scene(scene, _theta(pixel_model="step (auto)",
+                                                                 dead_time_us=400.0), n_samples=8))
+    np.testing.assert_array_equal(plain, edi_scene(scene, (0.2, 0.25), n_samples=8))
+    assert float(np.abs(got - plain).max()) > 1e-3  # the weights reach the images
+
+
+def test_edi_refuses_a_reset_calibration_with_a_bad_dead_time(scene):
+    from fusiongs.errors import InputError
+    from fusiongs.eval.edi import edi_scene
+
+    with pytest.raises(InputError, match="dead_time_us"):
+        edi_scene(scene, _theta(pixel_model="reset", dead_time_us="400"), n_samples=4)
