@@ -148,7 +148,9 @@ def read_calibration(path: str | Path) -> tuple[SensorThresholds, dict]:
         raise InputError(p, "format", f'"{FORMAT_NAME}"', doc.get("format") if isinstance(doc, dict) else doc)
     if "thresholds" not in doc:
         raise InputError(p, "thresholds", "an object with channels, theta_pos and theta_neg", "missing")
-    return SensorThresholds.from_dict(doc["thresholds"], str(p)), doc
+    th = SensorThresholds.from_dict(doc["thresholds"], str(p))
+    reset_model_parameters(th, p)  # a reset calibration's numbers checked here, naming the file
+    return th, doc
 
 
 def calibration_document(thresholds: SensorThresholds, **extra) -> dict:
@@ -174,12 +176,35 @@ def detail_number(thresholds: SensorThresholds, key: str) -> float | None:
     return float(v)
 
 
+def reset_model_parameters(thresholds: SensorThresholds, where: str | Path = "calibration"
+                           ) -> tuple[float, float] | None:
+    """``(dead time µs, weight cap)`` when the calibration chose the pixel model of a pixel held in
+    reset (its details' ``pixel_model``, ``dead_time_us`` and ``reset_weight_cap``, default cap 4),
+    else None.
+
+    Raises:
+        InputError: naming ``where`` (the file, when read from one), for a reset calibration whose
+            dead time or cap is not a valid number.
+    """
+    model = thresholds.details.get("pixel_model")
+    if not (isinstance(model, str) and model.startswith("reset")):
+        return None
+    dead = detail_number(thresholds, "dead_time_us")
+    cap = detail_number(thresholds, "reset_weight_cap") if "reset_weight_cap" in thresholds.details else 4.0
+    if dead is None or dead < 0:
+        raise InputError(where, "details.dead_time_us", "a dead time >= 0 (µs) for the reset pixel model",
+                         repr(thresholds.details.get("dead_time_us")))
+    if cap is None or cap < 1:
+        raise InputError(where, "details.reset_weight_cap", "a number >= 1",
+                         repr(thresholds.details.get("reset_weight_cap")))
+    return dead, cap
+
+
 def calibration_event_weights(events, thresholds) -> np.ndarray | None:
     """``[E]`` float32 threshold crossings each event of ``events`` stands for, where the
-    calibration ``thresholds`` chose the pixel model of a pixel held in reset (its details'
-    ``pixel_model``, ``dead_time_us`` and ``reset_weight_cap``;
-    :func:`fusiongs.events.stats.reset_weights`); None otherwise (the events count once each),
-    also for thresholds that are plain numbers.
+    calibration ``thresholds`` chose the pixel model of a pixel held in reset
+    (:func:`reset_model_parameters`; :func:`fusiongs.events.stats.reset_weights`); None otherwise
+    (the events count once each), also for thresholds that are plain numbers.
 
     Raises:
         InputError: a reset calibration whose dead time or cap is not a valid number.
@@ -188,17 +213,7 @@ def calibration_event_weights(events, thresholds) -> np.ndarray | None:
 
     if not isinstance(thresholds, SensorThresholds):
         return None
-    model = thresholds.details.get("pixel_model")
-    if not (isinstance(model, str) and model.startswith("reset")):
+    params = reset_model_parameters(thresholds)
+    if params is None or params[0] == 0:
         return None
-    dead = detail_number(thresholds, "dead_time_us")
-    cap = detail_number(thresholds, "reset_weight_cap") if "reset_weight_cap" in thresholds.details else 4.0
-    if dead is None or dead < 0:
-        raise InputError("calibration", "details.dead_time_us", "a dead time >= 0 (µs) for the reset "
-                         "pixel model", repr(thresholds.details.get("dead_time_us")))
-    if cap is None or cap < 1:
-        raise InputError("calibration", "details.reset_weight_cap", "a number >= 1",
-                         repr(thresholds.details.get("reset_weight_cap")))
-    if dead == 0:
-        return None
-    return reset_weights(events, dead, cap)
+    return reset_weights(events, *params)

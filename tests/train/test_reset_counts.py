@@ -110,3 +110,15 @@ def test_edi_refuses_a_reset_calibration_with_a_bad_dead_time(scene):
 
     with pytest.raises(InputError, match="dead_time_us"):
         edi_scene(scene, _theta(pixel_model="reset", dead_time_us="400"), n_samples=4)
+
+
+def test_a_calibration_file_with_a_bad_reset_dead_time_is_refused_naming_the_file(tmp_path):
+    from fusiongs.errors import InputError
+    from fusiongs.events.thresholds import read_calibration, write_calibration
+
+    path = write_calibration(tmp_path / "calibration.json",
+                             _theta(pixel_model="reset (auto)", dead_time_us="400"))
+    with pytest.raises(InputError, match=r"calibration\.json: details\.dead_time_us"):
+        read_calibration(path)
+    good = write_calibration(tmp_path / "good.json", _theta(pixel_model="reset", dead_time_us=400.0))
+    assert read_calibration(good)[0].details["dead_time_us"] == 400.0
