@@ -137,6 +137,38 @@ def sample_free_windows(
     return torch.stack((start, start + dur), -1)
 
 
+def sample_chained_windows(
+    n: int,
+    t_range: tuple[float, float],
+    frame_interval: float,
+    generator: torch.Generator | None = None,
+    min_duration: float = 1e-3,
+) -> torch.Tensor:
+    """``n`` consecutive free windows, each one's end the next one's start: ``n + 1`` instants.
+
+    Each duration is log-uniform in ``[min_duration, frame_interval]`` as in
+    :func:`sample_free_windows` (all scaled down together when their sum exceeds ``t_range``), and
+    the chain's start is uniform so that it lies inside ``t_range``. ``n`` windows then need
+    ``n + 1`` renders instead of ``2 n``.
+
+    Returns:
+        ``[n + 1]`` float64 instants ``p_0 < … < p_n`` in seconds (window ``i`` is
+        ``[p_i, p_{i+1})``), ``t0 <= p_0`` and ``p_n <= t1``, on the generator's device.
+    """
+    t0, t1 = float(t_range[0]), float(t_range[1])
+    if not (n >= 1 and t1 > t0 and 0 < min_duration <= frame_interval):
+        raise InputError("sample_chained_windows", "n/t_range/frame_interval",
+                         "n >= 1, t1 > t0 and 0 < min_duration <= frame_interval",
+                         f"{n}, {t_range}, {min_duration}, {frame_interval}")
+    u = torch.rand(n + 1, generator=generator, dtype=torch.float64, device=_device(generator))
+    lo, hi = math.log(min_duration), math.log(frame_interval)
+    dur = torch.exp(lo + u[:n] * (hi - lo))
+    dur = dur * ((t1 - t0) / dur.sum()).clamp(max=1.0)
+    ends = torch.cumsum(dur, 0)
+    start = t0 + u[n:] * (t1 - t0 - ends[-1]).clamp(min=0.0)
+    return torch.cat((start, start + ends)).clamp(t0, t1)
+
+
 def sample_windows(
     exposures: torch.Tensor,
     frame: int,

@@ -31,9 +31,9 @@ from fusiongs.losses.event import (
 from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.crop import Crop
-from fusiongs.train.data import TrainData, block_mean
+from fusiongs.train.data import TrainData, block_mean, hpf_image_at
 from fusiongs.train.lowpass_term import LowpassHistory, lowpass_term
-from fusiongs.train.schedules import sample_exposure_pairs, sample_free_windows
+from fusiongs.train.schedules import sample_chained_windows, sample_exposure_pairs, sample_free_windows
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
 
@@ -241,7 +241,14 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         times.append(exposure_instants(s, e, n).to(torch.float64))
     free = torch.zeros(0, 2, dtype=torch.float64, device=gen.device)
     readout = None
-    if use_events and cfg.events.windows_free > 0:
+    chain = use_events and cfg.events.windows_free > 0 and cfg.events.chain_windows
+    if chain:  # n windows in n + 1 renders; the anchors between read-outs (hpf_image_at)
+        longest = longest_free_window(cfg, data)
+        points = sample_chained_windows(cfg.events.windows_free, data.t_range, longest, gen,
+                                        min(cfg.events.min_window, longest))
+        free = torch.stack((points[:-1], points[1:]), 1)
+        times.append(points)
+    elif use_events and cfg.events.windows_free > 0:
         longest = longest_free_window(cfg, data)
         free = sample_free_windows(cfg.events.windows_free, data.t_range, longest, gen,
                                    min(cfg.events.min_window, longest))
@@ -279,7 +286,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             pairs = sample_exposure_pairs(n, cfg.events.windows_inside, gen).tolist()
             windows += [(j, k, t_list[j], t_list[k]) for j, k in pairs]
         base = n if has_frames else 0
-        windows += [(base + 2 * i, base + 2 * i + 1, a, b) for i, (a, b) in enumerate(free.tolist())]
+        step = 1 if chain else 2  # renders per window: a chain's windows share their ends
+        windows += [(base + step * i, base + step * i + 1, a, b) for i, (a, b) in enumerate(free.tolist())]
         pixel_gen = gen if device_gen is None else device_gen
         if lam_ev > 0 and windows:
             l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, pixel_gen, crop)
@@ -287,18 +295,26 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             loss = loss + lam_ev * l_ev
             parts["event"] = l_ev.detach()
         if lam_ev > 0 and cfg.events.lowpass_weight > 0 and not has_frames and len(free):
-            ends = [(base + 2 * i + k, t, i) for i, ab in enumerate(free.tolist()) for k, t in enumerate(ab)]
+            if chain:  # each instant once: the long windows are its pairs at least `longest` apart
+                ends = [(base + k, t, k) for k, t in enumerate(t_list[base:])]
+            else:
+                ends = [(base + 2 * i + k, t, i)
+                        for i, ab in enumerate(free.tolist()) for k, t in enumerate(ab)]
             l_lp = lowpass_term(state, data, cfg, lin, ends, longest, lowpass_history)
             if l_lp is not None:
                 loss = loss + lam_ev * cfg.events.lowpass_weight * l_lp
                 parts["event_lowpass"] = l_lp.detach()
+        anchors = []  # (render index, HPF image) at each window's end
         if readout is not None:
-            readout = readout.tolist()
-            seen = [own_channel(lin[base + 2 * i + 1], data, cfg.events.grey_weights)
-                    for i in range(len(readout))]
-            l_int = sum(intensity_prior_loss(v, data.hpf[g], cfg.events.log_eps,
-                                             cfg.event_only.anchor_highpass)
-                        for v, g in zip(seen, readout)) / len(readout)
+            anchors = [(base + 2 * i + 1, data.hpf[g]) for i, g in enumerate(readout.tolist())]
+        elif chain and data.hpf is not None:
+            eo = cfg.event_only
+            anchors = [(base + k, hpf_image_at(data, t, eo.intensity_tau, cfg.threshold.init))
+                       for k, t in enumerate(t_list[base:]) if k > 0]
+        if anchors:
+            seen = [own_channel(lin[j], data, cfg.events.grey_weights) for j, _ in anchors]
+            l_int = sum(intensity_prior_loss(v, a, cfg.events.log_eps, cfg.event_only.anchor_highpass)
+                        for v, (_, a) in zip(seen, anchors)) / len(anchors)
             loss = loss + (1.0 - lam_ev) * l_int
             parts["intensity"] = l_int.detach()
     return StepResult(loss=loss, parts=parts, meta=meta, renders=lin, render_seconds=render_seconds)

@@ -173,6 +173,10 @@ CASES = {  # scene, overrides: together every training-time stage
                               "event_only.hpf_readouts=12", "threshold.regularise=0.1",
                               "events.windows_free=2", "events.max_window=0.02",
                               "events.lowpass_weight=1"]),
+    "event-only-chain": ("events", ["event_only.alpha_warmup=1", "event_only.alpha_ramp=2",
+                                    "event_only.hpf_readouts=12", "events.windows_free=2",
+                                    "events.max_window=0.02", "events.lowpass_weight=1",
+                                    "events.chain_windows=true", "events.lowpass_history=1"]),
 }
 
 
@@ -243,7 +247,7 @@ def test_records_are_read_back_together_and_a_diverged_loss_stops_training():
 
 
 # ------------------------------------------------------------------------------------------- CUDA
-CUDA_CASES = ["grey-mse-crop-edi", "colour-pvc-demosaic", "event-only"]
+CUDA_CASES = ["grey-mse-crop-edi", "colour-pvc-demosaic", "event-only", "event-only-chain"]
 # every pixel of a window is sampled, so the device generator's draws do not change the loss; the
 # host generator (frames, windows, crops) and the initialisation are the same on both devices
 SAME_DRAWS = ["events.pixels=100000", "densify.enabled=false", "backend=auto"]
