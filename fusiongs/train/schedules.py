@@ -125,25 +125,32 @@ def sample_free_windows(
         ``[n, 2]`` float64 ``(t_a, t_b)`` in seconds, ``t0 <= t_a < t_b <= t1``, on the
         generator's device.
     """
-    t0, t1 = float(t_range[0]), float(t_range[1])
-    if not (t1 > t0 and 0 < min_duration <= frame_interval):
-        raise InputError("sample_free_windows", "t_range/frame_interval",
-                         "t1 > t0 and 0 < min_duration <= frame_interval",
-                         f"{t_range}, {min_duration}, {frame_interval}")
+    t0, t1 = _check_windows("sample_free_windows", t_range, frame_interval, min_duration)
     u = torch.rand(n, 2, generator=generator, dtype=torch.float64, device=_device(generator))
-    lo, hi = math.log(min_duration), math.log(frame_interval)
-    dur = torch.exp(lo + u[:, 0] * (hi - lo)).clamp(max=t1 - t0)
+    dur = _log_uniform(u[:, 0], min_duration, frame_interval).clamp(max=t1 - t0)
     start = t0 + u[:, 1] * (t1 - t0 - dur)
     return torch.stack((start, start + dur), -1)
 
 
-def sample_chained_windows(
-    n: int,
-    t_range: tuple[float, float],
-    frame_interval: float,
-    generator: torch.Generator | None = None,
-    min_duration: float = 1e-3,
-) -> torch.Tensor:
+def _check_windows(caller: str, t_range: tuple[float, float], longest: float, shortest: float
+                   ) -> tuple[float, float]:
+    """``(t0, t1)`` of ``t_range`` once ``t1 > t0`` and ``0 < shortest <= longest`` hold."""
+    t0, t1 = float(t_range[0]), float(t_range[1])
+    if not (t1 > t0 and 0 < shortest <= longest):
+        raise InputError(caller, "t_range/frame_interval", "t1 > t0 and 0 < min_duration <= frame_interval",
+                         f"{t_range}, {shortest}, {longest}")
+    return t0, t1
+
+
+def _log_uniform(u: torch.Tensor, shortest: float, longest: float) -> torch.Tensor:
+    """Durations (s) log-uniform in ``[shortest, longest]`` from uniform draws ``u`` in [0, 1)."""
+    lo, hi = math.log(shortest), math.log(longest)
+    return torch.exp(lo + u * (hi - lo))
+
+
+def sample_chained_windows(n: int, t_range: tuple[float, float], frame_interval: float,
+                           generator: torch.Generator | None = None, min_duration: float = 1e-3
+                           ) -> torch.Tensor:
     """``n`` consecutive free windows, each one's end the next one's start: ``n + 1`` instants.
 
     Each duration is log-uniform in ``[min_duration, frame_interval]`` as in
@@ -155,14 +162,11 @@ def sample_chained_windows(
         ``[n + 1]`` float64 instants ``p_0 < … < p_n`` in seconds (window ``i`` is
         ``[p_i, p_{i+1})``), ``t0 <= p_0`` and ``p_n <= t1``, on the generator's device.
     """
-    t0, t1 = float(t_range[0]), float(t_range[1])
-    if not (n >= 1 and t1 > t0 and 0 < min_duration <= frame_interval):
-        raise InputError("sample_chained_windows", "n/t_range/frame_interval",
-                         "n >= 1, t1 > t0 and 0 < min_duration <= frame_interval",
-                         f"{n}, {t_range}, {min_duration}, {frame_interval}")
+    if n < 1:
+        raise InputError("sample_chained_windows", "n", "at least one window", n)
+    t0, t1 = _check_windows("sample_chained_windows", t_range, frame_interval, min_duration)
     u = torch.rand(n + 1, generator=generator, dtype=torch.float64, device=_device(generator))
-    lo, hi = math.log(min_duration), math.log(frame_interval)
-    dur = torch.exp(lo + u[:n] * (hi - lo))
+    dur = _log_uniform(u[:n], min_duration, frame_interval)
     dur = dur * ((t1 - t0) / dur.sum()).clamp(max=1.0)
     ends = torch.cumsum(dur, 0)
     start = t0 + u[n:] * (t1 - t0 - ends[-1]).clamp(min=0.0)
