@@ -241,17 +241,17 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         times.append(exposure_instants(s, e, n).to(torch.float64))
     free = torch.zeros(0, 2, dtype=torch.float64, device=gen.device)
     readout = None
-    chain = use_events and cfg.events.windows_free > 0 and cfg.events.chain_windows
-    if chain:  # n windows in n + 1 renders; the anchors between read-outs (hpf_image_at)
+    has_free = use_events and cfg.events.windows_free > 0
+    chain = has_free and cfg.events.chain_windows
+    if has_free:
         longest = longest_free_window(cfg, data)
-        points = sample_chained_windows(cfg.events.windows_free, data.t_range, longest, gen,
-                                        min(cfg.events.min_window, longest))
+        shortest = min(cfg.events.min_window, longest)
+    if chain:  # n windows in n + 1 renders; the anchors between read-outs (hpf_image_at)
+        points = sample_chained_windows(cfg.events.windows_free, data.t_range, longest, gen, shortest)
         free = torch.stack((points[:-1], points[1:]), 1)
         times.append(points)
-    elif use_events and cfg.events.windows_free > 0:
-        longest = longest_free_window(cfg, data)
-        free = sample_free_windows(cfg.events.windows_free, data.t_range, longest, gen,
-                                   min(cfg.events.min_window, longest))
+    elif has_free:
+        free = sample_free_windows(cfg.events.windows_free, data.t_range, longest, gen, shortest)
         if data.hpf is not None:
             free, readout = snap_to_readouts(free, data.hpf_times, data.t_range[0])
         if data.pvc_times is not None:  # pvc targets exist at read-outs only
@@ -286,8 +286,9 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             pairs = sample_exposure_pairs(n, cfg.events.windows_inside, gen).tolist()
             windows += [(j, k, t_list[j], t_list[k]) for j, k in pairs]
         base = n if has_frames else 0
-        step = 1 if chain else 2  # renders per window: a chain's windows share their ends
-        windows += [(base + step * i, base + step * i + 1, a, b) for i, (a, b) in enumerate(free.tolist())]
+        stride = 1 if chain else 2  # renders per window: a chain's windows share their ends
+        windows += [(base + stride * i, base + stride * i + 1, a, b)
+                    for i, (a, b) in enumerate(free.tolist())]
         pixel_gen = gen if device_gen is None else device_gen
         if lam_ev > 0 and windows:
             l_ev = sum(event_window_loss(state, data, cfg, lin[j], lin[k], ta, tb, pixel_gen, crop)
