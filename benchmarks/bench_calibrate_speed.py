@@ -1,7 +1,7 @@
-"""Time of ``fusiongs calibrate``'s estimator with the pixel model chosen by the frames ("auto": two
-fits where the recording has frames and an onset) against one fit ("step", the reference) on the
-same scene, measured in the same run (issue 13's target: an 8 M-event 173x130 scene in <= 30 s on
-2 CPU cores).
+"""Time of ``fusiongs calibrate``'s estimator with the pixel model chosen by the frames ("auto": the
+pixel model test, then one fit, where the recording has frames and an onset) against one fit with the
+model given ("step", the reference) on the same scene, measured in the same run (issue 13's
+target: an 8 M-event 173x130 scene in <= 30 s on 2 CPU cores).
 
     PYTHONPATH=. python benchmarks/bench_calibrate_speed.py SCENE [--reps 3]
 

@@ -20,8 +20,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="how the pixels lose events in their dead time: reset (a DVS pixel held "
                              "in reset: each event weighted by the crossings it stands for), step "
                              "(the reference level keeps every crossing: fast pixels gated only), or "
-                             "auto: both fitted, the one whose counts agree better with the frames "
-                             "kept (step without frames; default)")
+                             "auto: reset when the frames' coefficient on the crossings it adds "
+                             "exceeds 0.5 (step without frames; default)")
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
@@ -77,6 +77,12 @@ def run(args: argparse.Namespace) -> int:
     if str(th.details.get("pixel_model", "")).startswith("reset") and dead:
         print("pixel model: reset (held in reset during its dead time): each event counted as the "
               "threshold crossings it stands for, interval / (interval - dead time)")
+    test = th.details.get("pixel_model_test")
+    if isinstance(test, dict):
+        beta = test.get("coefficient")
+        print("pixel model test: the frames' coefficient on the crossings a reset pixel's events add: "
+              + (f"{beta:.2f}" if isinstance(beta, int | float) else "not measurable")
+              + f" (reset above {test['cut']}; channels {', '.join(test['channels']) or 'none'})")
     spread = th.details.get("threshold_spread")
     if isinstance(spread, dict):
         sd = [float(v) ** 0.5 for v in spread["log_variance"]]

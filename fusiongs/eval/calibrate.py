@@ -41,15 +41,15 @@ does not reach. Under that pixel model each event counts ``Δt / (Δt - d)`` cro
 intervals (:func:`fusiongs.events.stats.interval_floor`). The intervals alone cannot tell such a
 pixel from one whose level keeps every crossing (a scene's fastest edge also makes a floor, and a
 reset pixel on sharp edges also makes a step), so with frames and an onset ``pixel_model="auto"``
-fits both models and keeps the one whose fit explains the frames' log changes best (the higher
-mean agreement over channels, :func:`fusiongs.eval.calibrate_fit.agreement`). Measured on the 173x130
-tuning scenes (RESULTS.md, session 36): it keeps the step model on all 9 default-pixel scenes and
-the reset model on 6 of the 8 scenes simulated again with a reset pixel, whose largest error goes
-from 8.8-39.3 % to 1.1-22.2 % (6 / 8 within 10 %, before 1 / 8). The two fits differ in their gate
-as well as in their counts (the step model gates at the histogram's step, so not at all when it
-has none, as on a reset pixel; the reset model at the onset), and it is mostly the gate that the
-agreement tells apart: with one gate held fixed, weighting the counts lowers the agreement on
-most tuning scenes, the reset pixels' included (RESULTS.md, session 37).
+asks the frames: the coefficient of the crossings the reset weights add, in the consistency
+equation beside the plain counts, is 1 for a reset pixel and 0 for the other
+(:func:`fusiongs.eval.calibrate_model.excess_coefficient`, one value pooled over channels), and the
+reset model is kept above 0.5. On the 173x130 tuning scenes (RESULTS.md, session 39) it is 0.45-1.76
+on all 12 reset-pixel scenes and -0.32-0.18 on 13 of the 15 simulator's-pixel scenes where it could
+be measured (0.59 and 0.61 on depth 62 and dark 482, where the reset model is kept: 11.6 -> 3.7 %
+and 12.0 -> 27.1 %); the scenes simulated without a dead time keep the step model. An earlier rule
+kept the model whose fit correlated better with the frames; but weighted counts are noisier, which
+lowers the correlation even where they are right (RESULTS.md, sessions 36-37).
 
 Threshold spread: every fit that adds up pixels' moments weighs a pixel by its event count, i.e.
 by ``1 / theta_p``, and so measures the harmonic mean of the pixels' thresholds, below their mean
@@ -68,13 +68,14 @@ benchmarks/RESULTS.md, session 16), so one frame is treated as none for the scal
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate_fit import PairData, search_both
+from fusiongs.eval.calibrate_fit import PairData, iv_thresholds, search_both, search_thresholds
+from fusiongs.eval.calibrate_model import excess_coefficient
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.eval.edi import estimate_theta, event_count_samples
 from fusiongs.events.cfa import cfa_channel_index
@@ -133,8 +134,12 @@ class CalibrateOptions:
             histogram, fast pixel pairs are gated), ``"reset"`` (a DVS pixel held in reset: the
             dead time is the onset of the intervals and every event counts
             :func:`~fusiongs.events.stats.reset_weights` crossings, the gate kept), or ``"auto"``:
-            with two frames or more and an onset, both are fitted and the one whose counts agree
-            better with the frames is kept; otherwise ``"step"``.
+            with two frames or more and an onset, the frames' coefficient on the crossings the
+            reset model adds is measured (:func:`fusiongs.eval.calibrate_model.excess_coefficient`)
+            and the reset model kept when it exceeds ``excess_cut``; otherwise ``"step"``.
+        excess_cut: the coefficient above which "auto" keeps the reset model: 0.5, halfway between
+            the two models' values (1 for a reset pixel, 0 for the other), not tuned.
+        excess_min_pairs: fewest gated pixel pairs for a channel to enter that measurement.
         reset_weight_cap: the largest weight of one event on a reset pixel.
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision
@@ -178,6 +183,8 @@ class CalibrateOptions:
     own_gate_max_spread: float = 1.05
     dead_time_jump: float = 5.0
     pixel_model: str = "auto"
+    excess_cut: float = 0.5
+    excess_min_pairs: int = 1000
     reset_weight_cap: float = 4.0
     channel_prior: float = 0.05
     channel_outlier: float = 2.0
@@ -333,6 +340,88 @@ def _check_inputs(frames: FrameSet, events: EventStream) -> None:
                          f"{events.height}", f"{frames.images.shape[2]}x{frames.images.shape[1]}")
 
 
+def _count_inputs(frames: FrameSet, events: EventStream, opts: CalibrateOptions,
+                  weights: np.ndarray | None) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """The counts a fit needs, summed over ``weights`` when given: per frame ``[M, 2, H*W]`` from
+    mid-exposure to each EDI sample, ``[F-1, 2, H*W]`` between consecutive mid-exposures, and the
+    latter's same-channel neighbour medians (the instruments)."""
+    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
+    mids = 0.5 * (ts + te)
+    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples, weights)
+                       .reshape(opts.n_samples, 2, -1)) for a, b in zip(ts, te)]
+    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)),
+                                          weights).reshape(2, -1) for i in range(len(frames) - 1)])
+    neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
+    return counts, between, neigh
+
+
+def _gate_inputs(frames: FrameSet, events: EventStream, opts: CalibrateOptions, dead: float
+                 ) -> tuple[float, np.ndarray, np.ndarray]:
+    """The refractory gate at ``opts.refractory_gate`` dead times (µs): ``(gap, fast, bad_pair)``,
+    both ``[F-1, H*W]`` bool (the pixel's own fast events; the pairs the gate leaves out)."""
+    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
+    gap = opts.refractory_gate * dead
+    spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
+    fast = fast_in_spans(events, gap, spans)
+    bad_pair = refractory_mask(fast, events.height, events.width, opts.refractory_radius,
+                               opts.refractory_self)
+    return gap, fast, bad_pair
+
+
+def _channel_pixels(sens: np.ndarray, sat: np.ndarray, between: np.ndarray, chan: np.ndarray,
+                    hot: np.ndarray, c: int, name: str, opts: CalibrateOptions,
+                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Channel ``c``'s usable pixels (not hot, some events between the frames, lit and unsaturated
+    in a frame; at most ``opts.max_pixels``, a seeded subset) and the ``[F, H*W]`` frame mask."""
+    sel = np.flatnonzero((chan == c) & ~hot)
+    ref = np.quantile(sens[:, sel], 0.99) if sel.size else 1.0
+    frame_ok = (sens > opts.dark * ref) & ~sat
+    sel = sel[(between[:, :, sel].sum((0, 1)) > 0) & frame_ok[:, sel].any(0)]
+    if sel.size < opts.min_pixels:
+        raise InputError("calibrate", "events", f"events on at least {opts.min_pixels} usable "
+                         f"pixels of channel {name} between the frames", f"{sel.size} pixel(s)")
+    if sel.size > opts.max_pixels:
+        sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
+    return sel, frame_ok
+
+
+def _saturated(lin: np.ndarray, opts: CalibrateOptions) -> np.ndarray:
+    return np.asarray(lin.max(axis=-1)).reshape(lin.shape[0], -1) >= opts.saturation
+
+
+def _excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.ndarray,
+                 chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions,
+                 dead: float) -> dict:
+    """The pixel model's test of ``pixel_model="auto"``: the frames' coefficient on the crossings a
+    reset pixel's events would add (:func:`fusiongs.eval.calibrate_model.excess_coefficient`),
+    pooled over the channels with at least ``opts.excess_min_pairs`` gated pixel pairs; plain and
+    weighted counts on the same pixels with the gate at the dead time ``dead`` (µs)."""
+    rng = np.random.default_rng(opts.seed)
+    weights = reset_weights(events, dead, opts.reset_weight_cap)
+    sens = sensor_intensity(lin, events.cfa)
+    sat = _saturated(lin, opts)
+    plain, weighted = _count_inputs(frames, events, opts, None), _count_inputs(frames, events, opts, weights)
+    _, _, bad_pair = _gate_inputs(frames, events, opts, dead)
+    quick = replace(opts, bootstrap=0)
+    used, channels = [], []
+    for c, name in enumerate(names):
+        try:
+            sel, frame_ok = _channel_pixels(sens, sat, plain[1], chan, hot, c, name, opts, rng)
+        except InputError:
+            continue
+        d0, d1 = (prepare_channel(sens, *inp[:2], sel, bad_pair, frame_ok, events.width, opts.tile,
+                                  opts.max_gap, inp[2]) for inp in (plain, weighted))
+        if int(d0.valid.sum()) < opts.excess_min_pairs:
+            continue
+        start = search_thresholds(d0, quick, rng, count_units=False, refine=False)
+        fit = iv_thresholds(d0, (start["theta_pos"], start["theta_neg"]), quick, rng)
+        used.append(name)
+        channels.append((d0, d1, (fit["theta_pos"], fit["theta_neg"])))
+    beta = excess_coefficient(channels)
+    return {"coefficient": beta if np.isfinite(beta) else None, "channels": used,
+            "dead_time_us": dead, "cut": opts.excess_cut}
+
+
 def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, hot: np.ndarray,
                chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions, reset: bool,
                dead: float) -> dict:
@@ -346,34 +435,14 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
     if lin is None:
         return {"ratio": ratio, "dead": dead, "agreement": -np.inf}
     sens = sensor_intensity(lin, events.cfa)
-    f = len(frames)
-    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
-    mids = 0.5 * (ts + te)
-    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples, weights)
-                       .reshape(opts.n_samples, 2, -1)) for a, b in zip(ts, te)]
-    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)),
-                                          weights).reshape(2, -1) for i in range(f - 1)])
-    gap = opts.refractory_gate * dead
-    spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
-    fast = fast_in_spans(events, gap, spans)
-    bad_pair = refractory_mask(fast, events.height, events.width, opts.refractory_radius,
-                               opts.refractory_self)
-    sat = np.asarray(lin.max(axis=-1)).reshape(f, -1) >= opts.saturation
-    neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
+    counts, between, neigh = _count_inputs(frames, events, opts, weights)
+    gap, fast, bad_pair = _gate_inputs(frames, events, opts, dead)
+    sat = _saturated(lin, opts)
     var, n_spread = threshold_spread(events, hot, weights=weights)
     spread_small = bool(np.all(np.exp(var) <= opts.own_gate_max_spread))
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
     for c in range(len(names)):
-        sel = np.flatnonzero((chan == c) & ~hot)
-        ref = np.quantile(sens[:, sel], 0.99) if sel.size else 1.0
-        frame_ok = (sens > opts.dark * ref) & ~sat
-        active = np.flatnonzero((between[:, :, sel].sum((0, 1)) > 0) & frame_ok[:, sel].any(0))
-        sel = sel[active]
-        if sel.size < opts.min_pixels:
-            raise InputError("calibrate", "events", f"events on at least {opts.min_pixels} usable "
-                             f"pixels of channel {names[c]} between the frames", f"{sel.size} pixel(s)")
-        if sel.size > opts.max_pixels:
-            sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
+        sel, frame_ok = _channel_pixels(sens, sat, between, chan, hot, c, names[c], opts, rng)
         data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
                                opts.max_gap, neigh)
         gate = _gate_name(opts, gap)
@@ -437,27 +506,30 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     chan = pixel_channels(events)
     names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS
     floor = interval_floor(events, opts.dead_time_jump)
-    if opts.pixel_model != "auto":
-        models = [opts.pixel_model]
-    else:  # a floor without a step may be a reset pixel's, or only the scene's fastest edge
-        models = ["step", "reset"] if floor.onset_us > 0 and len(frames) >= 2 else ["step"]
     lin = frames.to_linear() if len(frames) >= 2 else None
-    fits = {}
-    for m in models:
-        try:
-            fits[m] = _model_fit(frames, lin, events, hot, chan, names, opts, m == "reset",
-                                 floor.onset_us if m == "reset" else floor.step_us)
-        except InputError:
-            if len(models) == 1 or m == "step":
-                raise
-    agree = {m: fit["agreement"] for m, fit in fits.items()}
-    model = "reset" if agree.get("reset", -np.inf) > agree.get("step", -np.inf) else models[0]
-    fit = fits[model]
+    test = None
+    if opts.pixel_model != "auto":
+        model = opts.pixel_model
+    elif floor.onset_us > 0 and lin is not None:  # the frames tell the two pixels apart
+        test = _excess_test(frames, lin, events, hot, chan, names, opts,
+                            max(floor.onset_us, floor.step_us))
+        beta = test["coefficient"]
+        model = "reset" if beta is not None and beta > opts.excess_cut else "step"
+    else:
+        model = "step"
+    try:
+        fit = _model_fit(frames, lin, events, hot, chan, names, opts, model == "reset",
+                         floor.onset_us if model == "reset" else floor.step_us)
+    except InputError:
+        if test is None or model == "step":
+            raise
+        model = "step"  # the reset model's gate left a channel without pixel pairs
+        fit = _model_fit(frames, lin, events, hot, chan, names, opts, False, floor.step_us)
     ratio = fit["ratio"]
     details = {"hot_pixels": int(hot.sum()), "events": int(len(events)), "frames": int(len(frames)),
                "ratio_from_event_balance": [r["ratio"] for r in ratio], "dead_time_us": fit["dead"],
                "pixel_model": model + (" (auto)" * (opts.pixel_model == "auto")),
-               "pixel_model_agreement": {m: a if np.isfinite(a) else None for m, a in agree.items()},
+               "pixel_model_test": test,
                "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us}}
     if model == "reset":
         details["reset_weight_cap"] = opts.reset_weight_cap

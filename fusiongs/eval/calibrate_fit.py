@@ -183,6 +183,29 @@ def log_sharp(data: PairData, theta_pos: float, theta_neg: float) -> torch.Tenso
     return data.log_s - (torch.logsumexp(e, dim=1) - float(np.log(data.n.shape[1])))
 
 
+def moment_rows(y: torch.Tensor, xs: list[torch.Tensor], zs: list[torch.Tensor], keep: torch.Tensor
+                ) -> torch.Tensor:
+    """Per-pixel IV moments ``[P, K, K + 1]`` of ``y`` on regressors ``xs`` with instruments ``zs``.
+
+    Args:
+        y: ``[Q, P]`` responses; xs, zs: ``K`` tensors ``[Q, P]`` each; keep: ``[Q, P]`` bool.
+
+    Row ``k`` is ``[sum_q z_k x_l for l] + [sum_q z_k y]`` per pixel, every quantity centred per
+    pair over ``keep`` (the per-pair offset ``b``) and zero where not kept.
+    """
+    w = keep.to(y.dtype)
+    cnt = w.sum(1, keepdim=True).clamp_min(1.0)
+
+    def centred(v):  # subtract the pair's mean over the kept pixels (the per-pair offset b)
+        return (v - (v * w).sum(-1, keepdim=True) / cnt) * w
+
+    xs = [centred(v) for v in xs]
+    yc = centred(y)
+    rows = [torch.stack([(z * x).sum(0) for x in xs] + [(z * yc).sum(0)], -1)
+            for z in (centred(v) for v in zs)]  # K x [P, K + 1]
+    return torch.stack(rows, 1).to(torch.float64)
+
+
 def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
                    ) -> torch.Tensor:
     """Per-pixel sums of the instrumental-variable normal equations ``[P, K, K + 1]``.
@@ -190,26 +213,15 @@ def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offs
     Regressors (``K`` = 4, or 2 without ``offsets``): ``N_+``, ``-N_-``, and the indicators
     ``[N_+ > 0]``, ``-[N_- > 0]`` whose coefficients absorb the part of a threshold a pixel's
     reference level had already covered (or still lacked) at the first frame; instruments: the
-    same functions of the neighbours' counts. Columns ``[sum z_k x_l for l] + [sum z_k y]``, all
-    centred per pair over ``keep`` (the per-pair offset ``b``).
+    same functions of the neighbours' counts (:func:`moment_rows`).
     """
     y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]  # [Q, P]
-    w = keep.to(y.dtype)
-    cnt = w.sum(1, keepdim=True).clamp_min(1.0)
-
-    def centred(v):  # subtract the pair's mean over the kept pixels (the per-pair offset b)
-        return (v - (v * w).sum(-1, keepdim=True) / cnt) * w
-
     xs = [data.dn[:, 0], -data.dn[:, 1]]
     zs = [data.z[:, 0], -data.z[:, 1]]
     if offsets:
         xs += [(data.dn[:, 0] > 0).to(y.dtype), -(data.dn[:, 1] > 0).to(y.dtype)]
         zs += [(data.z[:, 0] > 0.5).to(y.dtype), -(data.z[:, 1] > 0.5).to(y.dtype)]
-    xs = [centred(v) for v in xs]
-    zs = [centred(v) for v in zs]
-    yc = centred(y)
-    rows = [torch.stack([(z * x).sum(0) for x in xs] + [(z * yc).sum(0)], -1) for z in zs]  # [P, K+1]
-    return torch.stack(rows, 1).to(torch.float64)
+    return moment_rows(y, xs, zs, keep)
 
 
 def _iv_sums(data: PairData, per_pix: torch.Tensor) -> torch.Tensor:

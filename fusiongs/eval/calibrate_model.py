@@ -1,0 +1,86 @@
+"""Which pixel model a recording's events follow, measured from the frames (:mod:`fusiongs.eval.calibrate`).
+
+A DVS pixel held in reset during its dead time ``d`` (Lichtsteiner et al., IEEE JSSC 2008) loses
+the change of its blind time: an event ``Δt`` after its pixel's previous one stands for
+``w = Δt / (Δt - d)`` crossings (:func:`fusiongs.events.stats.reset_weights`). A pixel whose level
+keeps every crossing loses only the events themselves, and outside its fastest pairs (which the
+refractory gate leaves out) each event stands for one crossing. So between two frames
+
+    ``log L_j - log L_i = theta_+ (N_+ + beta E_+) - theta_- (N_- + beta E_-) + b_ij``
+
+with ``N`` the plain counts, ``E = sum (w - 1)`` the crossings the reset model adds, and ``beta``
+= 1 for a reset pixel, 0 for the other. :func:`excess_coefficient` estimates ``beta`` from the
+frames, one value for all channels and both polarities, by the same instrumental variables as the
+threshold fit (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`): the neighbours' counts and
+excesses instrument the pixel's. Per channel, it is too noisy on a Bayer sensor's sparse red and
+blue pixels (tuning scenes: -0.4 to 3.3 on one reset pixel); pooled, it separates the two
+simulated pixels on every tuning scene where either model's fit holds (RESULTS.md, session 39).
+
+A criterion that compares how well each model's counts correlate with the frames (the fits'
+agreement) cannot do this: noisier weighted counts lower the correlation even when they are right
+(RESULTS.md, session 37).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from fusiongs.eval.calibrate_fit import PairData, _identified, log_sharp, moment_rows
+
+
+def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, float]]],
+                       iters: int = 4) -> float:
+    """The coefficient ``beta`` of the reset model's extra crossings, pooled over channels.
+
+    Args:
+        channels: per channel ``(plain, weighted, (theta_+, theta_-))``: the same pixels, pairs and
+            gate with plain counts and with reset-weighted counts (their difference is ``E``), and
+            a starting estimate of the channel's thresholds (from the plain counts).
+        iters: re-solves (the EDI term of the log change depends on ``beta`` and the thresholds).
+
+    Returns:
+        ``beta`` (dimensionless; about 1 for a reset pixel, 0 for one whose level keeps every
+        crossing), NaN when the pooled system is singular or there is no channel.
+
+    One block IV system: per channel its ON and OFF thresholds and the two indicator offsets of
+    :func:`~fusiongs.eval.calibrate_fit.iv_thresholds` (each channel with its own per-pair offset),
+    and one shared coefficient on ``theta_+ E_+ - theta_- E_-`` (the current thresholds held
+    fixed inside that regressor).
+    """
+    n_ch = len(channels)
+    if n_ch == 0:
+        return float("nan")
+    theta = [tuple(float(v) for v in start) for _, _, start in channels]
+    beta = 0.0
+    k = 4 * n_ch + 1
+    for _ in range(iters):
+        system = torch.zeros(k, k + 1, dtype=torch.float64)
+        for c, (plain, weighted, _) in enumerate(channels):
+            tp, tn = theta[c]
+            mixed = replace(plain, n=plain.n + beta * (weighted.n - plain.n))
+            log_l = log_sharp(mixed, tp, tn)
+            y = log_l[plain.pairs[:, 1]] - log_l[plain.pairs[:, 0]]
+            ex, ez = weighted.dn - plain.dn, weighted.z - plain.z  # [Q, 2, P]
+            f = y.dtype
+            xs = [plain.dn[:, 0], -plain.dn[:, 1], (plain.dn[:, 0] > 0).to(f),
+                  -(plain.dn[:, 1] > 0).to(f), tp * ex[:, 0] - tn * ex[:, 1]]
+            zs = [plain.z[:, 0], -plain.z[:, 1], (plain.z[:, 0] > 0.5).to(f),
+                  -(plain.z[:, 1] > 0.5).to(f), tp * ez[:, 0] - tn * ez[:, 1]]
+            m = moment_rows(y, xs, zs, plain.valid).sum(0)  # [5, 6]
+            rows = torch.tensor(list(range(4 * c, 4 * c + 4)) + [k - 1])
+            system[rows[:, None], torch.cat([rows, torch.tensor([k])])] += m
+        idx = _identified(system[None])
+        if (k - 1) not in idx.tolist():
+            return float("nan")
+        sol, info = torch.linalg.solve_ex(system[idx[:, None], idx], system[idx, -1])
+        if int(info) != 0 or not bool(torch.isfinite(sol).all()):
+            return float("nan")
+        full = dict(zip(idx.tolist(), sol.tolist()))
+        theta = [(full[4 * c], full[4 * c + 1]) for c in range(n_ch)]
+        if not all(np.isfinite(t).all() and min(t) > 0 for t in theta):
+            return float("nan")
+        beta = full[k - 1]
+    return float(beta)
