@@ -402,8 +402,8 @@ def _excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np
     sat = _saturated(lin, opts)
     plain, weighted = _count_inputs(frames, events, opts, None), _count_inputs(frames, events, opts, weights)
     _, _, bad_pair = _gate_inputs(frames, events, opts, dead)
-    # A coarse start is enough: the IV re-solves from it (the coefficient agreed to 4 digits with
-    # the full grid's start on 9 tuning and test scenes, RESULTS.md session 39).
+    # A coarse start is enough: the IV re-solves from it (the coefficient, the model kept and the
+    # estimate were those of the full grid's start on 30 tuning and test scenes; RESULTS.md, s. 39).
     quick = replace(opts, bootstrap=0, coarse_pixels=min(opts.coarse_pixels, 1000),
                     coarse_steps=min(opts.coarse_steps, 9))
     used, channels = [], []
