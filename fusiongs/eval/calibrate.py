@@ -68,19 +68,26 @@ benchmarks/RESULTS.md, session 16), so one frame is treated as none for the scal
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
-import torch
 
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate_fit import PairData, iv_thresholds, search_both, search_thresholds
-from fusiongs.eval.calibrate_model import excess_coefficient
+from fusiongs.eval.calibrate_data import (
+    channel_pixels,
+    count_inputs,
+    gate_inputs,
+    pixel_channels,
+    prepare_channel,
+    saturated,
+    sensor_intensity,
+    tile_ids,
+)
+from fusiongs.eval.calibrate_fit import search_both
+from fusiongs.eval.calibrate_model import excess_test
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
-from fusiongs.eval.edi import estimate_theta, event_count_samples
-from fusiongs.events.cfa import cfa_channel_index
+from fusiongs.eval.edi import estimate_theta
 from fusiongs.events.stats import (
-    fast_in_spans,
     interval_floor,
     reset_weights,
     spatial_hot_pixels,
@@ -89,9 +96,6 @@ from fusiongs.events.stats import (
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresholds
 from fusiongs.frames.frameset import FrameSet
-
-REC601 = (0.299, 0.587, 0.114)
-
 
 PIXEL_MODELS = ("auto", "step", "reset")  # CalibrateOptions.pixel_model
 
@@ -199,113 +203,6 @@ class CalibrateOptions:
     seed: int = 0
 
 
-# ---------------------------------------------------------------------------- sensor views
-def sensor_intensity(linear: np.ndarray, cfa: str | None) -> np.ndarray:
-    """``[F, H*W]`` float64 linear intensity each event pixel sees, from ``[F, H, W, C]`` frames.
-
-    Grey sensors see the Rec.601 luminance of RGB frames (the frame itself when C = 1); colour
-    sensors see their own CFA channel of an RGB frame.
-    """
-    f, h, w, c = linear.shape
-    lin = linear.astype(np.float64, copy=False)
-    if cfa is None:
-        s = lin[..., 0] if c == 1 else lin @ np.asarray(REC601)
-    else:
-        if c != 3:
-            raise InputError("calibrate", "frames", "RGB frames for a colour (CFA) event sensor",
-                             f"{c} channel(s)")
-        ch = cfa_channel_index(cfa, h, w).astype(np.int64)
-        s = np.take_along_axis(lin, np.broadcast_to(ch[None, ..., None], (f, h, w, 1)), axis=-1)[..., 0]
-    return s.reshape(f, h * w)
-
-
-def pixel_channels(events: EventStream) -> np.ndarray:
-    """``[H*W]`` int64 channel of every pixel (0 for a grey sensor, 0/1/2 = R/G/B for a CFA)."""
-    if events.cfa is None:
-        return np.zeros(events.height * events.width, np.int64)
-    return cfa_channel_index(events.cfa, events.height, events.width).astype(np.int64).reshape(-1)
-
-
-def neighbour_counts(between: np.ndarray, height: int, width: int, step: int) -> np.ndarray:
-    """``[F-1, 2, H*W]`` median of the four same-channel neighbours' counts (``step`` pixels away:
-    1 on a grey sensor, 2 on a CFA), edges replicated: the instruments of
-    :func:`~fusiongs.eval.calibrate_fit.iv_thresholds`."""
-    q = between.shape[0]
-    m = between.reshape(q, 2, height, width).astype(np.float32)
-    pad = np.pad(m, ((0, 0), (0, 0), (step, step), (step, step)), mode="edge")
-    h, w = height, width
-    nb = np.stack([pad[..., 0:h, step:step + w], pad[..., 2 * step:2 * step + h, step:step + w],
-                   pad[..., step:step + h, 0:w], pad[..., step:step + h, 2 * step:2 * step + w]])
-    return np.median(nb, axis=0).reshape(q, 2, h * w)
-
-
-# ---------------------------------------------------------------------------- data preparation
-def tile_ids(pix: np.ndarray, width: int, tile: int) -> np.ndarray:
-    """``[P]`` int64 index of the ``tile`` x ``tile`` pixel square holding each flat pixel index."""
-    tiles_x = (width + tile - 1) // tile
-    return (pix // width // tile) * tiles_x + (pix % width) // tile
-
-
-def frame_pairs(n_frames: int, max_gap: int) -> np.ndarray:
-    """``[Q, 2]`` int64 pairs ``(i, j)`` with ``1 <= j - i <= max_gap`` (all baselines up to it)."""
-    return np.array([(i, i + k) for k in range(1, max_gap + 1) for i in range(n_frames - k)],
-                    dtype=np.int64).reshape(-1, 2)
-
-
-def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray, pix: np.ndarray,
-                    bad_pair: np.ndarray, frame_ok: np.ndarray, width: int, tile: int,
-                    max_gap: int = 1,
-                    neighbours: np.ndarray | None = None) -> PairData:
-    """:class:`PairData` of the pixels ``pix`` (flat indices).
-
-    Args:
-        sens: ``[F, H*W]`` linear sensor intensity. counts: F arrays ``[M, 2, H*W]``.
-        between: ``[F-1, 2, H*W]`` counts between consecutive mid-exposures. pix: ``[P]`` pixels.
-        bad_pair: ``[F-1, H*W]`` bool, pixel excluded from a consecutive pair (refractory gate);
-            a longer pair is excluded when any consecutive pair it spans is.
-        frame_ok: ``[F, H*W]`` bool, intensity neither saturated nor near black.
-        width: sensor width (tiles). tile: tile side in pixels.
-        max_gap: longest baseline ``j - i`` of the compared frame pairs.
-        neighbours: ``[F-1, 2, H*W]`` instrument counts between consecutive mid-exposures
-            (:func:`neighbour_counts`); ``between`` itself when None.
-    """
-    f = sens.shape[0]
-    neighbours = between if neighbours is None else neighbours
-    log_s = np.log(np.maximum(sens[:, pix], 1e-12))
-    n = np.stack([c[..., pix] for c in counts]).astype(np.float32)
-    pairs = frame_pairs(f, max_gap)
-    cum = np.concatenate([np.zeros((1, 2, pix.size), np.float32),
-                          np.cumsum(between[..., pix].astype(np.float32), axis=0)])
-    dn = cum[pairs[:, 1]] - cum[pairs[:, 0]]  # [Q, 2, P]
-    bad_cum = np.concatenate([np.zeros((1, pix.size), np.int32), np.cumsum(bad_pair[:, pix], axis=0)])
-    bad = (bad_cum[pairs[:, 1]] - bad_cum[pairs[:, 0]]) > 0
-    moved = np.abs(n).sum((1, 2))  # [F] events inside each exposure
-    active = (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
-    valid = frame_ok[pairs[:, 0]][:, pix] & frame_ok[pairs[:, 1]][:, pix] & ~bad & active
-    uniq, tid = np.unique(tile_ids(pix, width, tile), return_inverse=True)
-    zc = np.concatenate([np.zeros((1, 2, pix.size), np.float32),
-                         np.cumsum(neighbours[..., pix].astype(np.float32), axis=0)])
-    z = zc[pairs[:, 1]] - zc[pairs[:, 0]]
-    return PairData(torch.as_tensor(log_s, dtype=torch.float32), torch.as_tensor(n),
-                    torch.as_tensor(pairs), torch.as_tensor(dn), torch.as_tensor(valid),
-                    torch.as_tensor(tid.astype(np.int64)), int(uniq.size),
-                    torch.as_tensor(z))
-
-
-def refractory_mask(fast: np.ndarray, height: int, width: int, radius: int, own: bool) -> np.ndarray:
-    """``[F-1, H*W]`` bool pixel pairs left out by the refractory gate, from ``fast`` (``[F-1, H*W]``:
-    the pixel has two events closer than the gap inside the pair): any pixel within ``radius``
-    (a square) is fast, the pixel itself counted only when ``own``."""
-    from scipy.ndimage import maximum_filter
-
-    if radius <= 0:
-        return fast.copy() if own else np.zeros_like(fast)
-    foot = np.ones((1, 2 * radius + 1, 2 * radius + 1), bool)
-    foot[0, radius, radius] = own
-    return maximum_filter(fast.reshape(-1, height, width), footprint=foot,
-                          mode="nearest").reshape(fast.shape)
-
-
 def _unreliable(res: dict, opts: CalibrateOptions) -> bool:
     """The fit failed, or (with a bootstrap) either threshold's relative std exceeds
     ``opts.refractory_max_uncertainty`` or is unknown."""
@@ -340,91 +237,6 @@ def _check_inputs(frames: FrameSet, events: EventStream) -> None:
                          f"{events.height}", f"{frames.images.shape[2]}x{frames.images.shape[1]}")
 
 
-def _count_inputs(frames: FrameSet, events: EventStream, opts: CalibrateOptions,
-                  weights: np.ndarray | None) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
-    """The counts a fit needs, summed over ``weights`` when given: per frame ``[M, 2, H*W]`` from
-    mid-exposure to each EDI sample, ``[F-1, 2, H*W]`` between consecutive mid-exposures, and the
-    latter's same-channel neighbour medians (the instruments)."""
-    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
-    mids = 0.5 * (ts + te)
-    counts = [_compact(event_count_samples(events, float(a), float(b), opts.n_samples, weights)
-                       .reshape(opts.n_samples, 2, -1)) for a, b in zip(ts, te)]
-    between = np.stack([events.count_maps(int(round(mids[i] * 1e6)), int(round(mids[i + 1] * 1e6)),
-                                          weights).reshape(2, -1) for i in range(len(frames) - 1)])
-    neigh = neighbour_counts(between, events.height, events.width, 1 if events.cfa is None else 2)
-    return counts, between, neigh
-
-
-def _gate_inputs(frames: FrameSet, events: EventStream, opts: CalibrateOptions, dead: float
-                 ) -> tuple[float, np.ndarray, np.ndarray]:
-    """The refractory gate at ``opts.refractory_gate`` dead times (µs): ``(gap, fast, bad_pair)``,
-    both ``[F-1, H*W]`` bool (the pixel's own fast events; the pairs the gate leaves out)."""
-    ts, te = np.asarray(frames.t_start, np.float64), np.asarray(frames.t_end, np.float64)
-    gap = opts.refractory_gate * dead
-    spans = np.stack([np.floor(ts[:-1] * 1e6), np.ceil(te[1:] * 1e6)], 1).astype(np.int64)
-    fast = fast_in_spans(events, gap, spans)
-    bad_pair = refractory_mask(fast, events.height, events.width, opts.refractory_radius,
-                               opts.refractory_self)
-    return gap, fast, bad_pair
-
-
-def _channel_pixels(sens: np.ndarray, sat: np.ndarray, between: np.ndarray, chan: np.ndarray,
-                    hot: np.ndarray, c: int, name: str, opts: CalibrateOptions,
-                    rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Channel ``c``'s usable pixels (not hot, some events between the frames, lit and unsaturated
-    in a frame; at most ``opts.max_pixels``, a seeded subset) and the ``[F, H*W]`` frame mask."""
-    sel = np.flatnonzero((chan == c) & ~hot)
-    ref = np.quantile(sens[:, sel], 0.99) if sel.size else 1.0
-    frame_ok = (sens > opts.dark * ref) & ~sat
-    sel = sel[(between[:, :, sel].sum((0, 1)) > 0) & frame_ok[:, sel].any(0)]
-    if sel.size < opts.min_pixels:
-        raise InputError("calibrate", "events", f"events on at least {opts.min_pixels} usable "
-                         f"pixels of channel {name} between the frames", f"{sel.size} pixel(s)")
-    if sel.size > opts.max_pixels:
-        sel = np.sort(rng.choice(sel, opts.max_pixels, replace=False))
-    return sel, frame_ok
-
-
-def _saturated(lin: np.ndarray, opts: CalibrateOptions) -> np.ndarray:
-    return np.asarray(lin.max(axis=-1)).reshape(lin.shape[0], -1) >= opts.saturation
-
-
-def _excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.ndarray,
-                 chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions,
-                 dead: float) -> dict:
-    """The pixel model's test of ``pixel_model="auto"``: the frames' coefficient on the crossings a
-    reset pixel's events would add (:func:`fusiongs.eval.calibrate_model.excess_coefficient`),
-    pooled over the channels with at least ``opts.excess_min_pairs`` gated pixel pairs; plain and
-    weighted counts on the same pixels with the gate at the dead time ``dead`` (µs)."""
-    rng = np.random.default_rng(opts.seed)
-    weights = reset_weights(events, dead, opts.reset_weight_cap)
-    sens = sensor_intensity(lin, events.cfa)
-    sat = _saturated(lin, opts)
-    plain, weighted = _count_inputs(frames, events, opts, None), _count_inputs(frames, events, opts, weights)
-    _, _, bad_pair = _gate_inputs(frames, events, opts, dead)
-    # A coarse start is enough: the IV re-solves from it (the coefficient, the model kept and the
-    # estimate were those of the full grid's start on 30 tuning and test scenes; RESULTS.md, s. 39).
-    quick = replace(opts, bootstrap=0, coarse_pixels=min(opts.coarse_pixels, 1000),
-                    coarse_steps=min(opts.coarse_steps, 9))
-    used, channels = [], []
-    for c, name in enumerate(names):
-        try:
-            sel, frame_ok = _channel_pixels(sens, sat, plain[1], chan, hot, c, name, opts, rng)
-        except InputError:
-            continue
-        d0, d1 = (prepare_channel(sens, *inp[:2], sel, bad_pair, frame_ok, events.width, opts.tile,
-                                  opts.max_gap, inp[2]) for inp in (plain, weighted))
-        if int(d0.valid.sum()) < opts.excess_min_pairs:
-            continue
-        start = search_thresholds(d0, quick, rng, count_units=False, refine=False)
-        fit = iv_thresholds(d0, (start["theta_pos"], start["theta_neg"]), quick, rng)
-        used.append(name)
-        channels.append((d0, d1, (fit["theta_pos"], fit["theta_neg"])))
-    beta = excess_coefficient(channels)
-    return {"coefficient": beta if np.isfinite(beta) else None, "channels": used,
-            "dead_time_us": dead, "cut": opts.excess_cut}
-
-
 def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, hot: np.ndarray,
                chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions, reset: bool,
                dead: float) -> dict:
@@ -438,14 +250,14 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
     if lin is None:
         return {"ratio": ratio, "dead": dead, "agreement": -np.inf}
     sens = sensor_intensity(lin, events.cfa)
-    counts, between, neigh = _count_inputs(frames, events, opts, weights)
-    gap, fast, bad_pair = _gate_inputs(frames, events, opts, dead)
-    sat = _saturated(lin, opts)
+    counts, between, neigh = count_inputs(frames, events, opts, weights)
+    gap, fast, bad_pair = gate_inputs(frames, events, opts, dead)
+    sat = saturated(lin, opts)
     var, n_spread = threshold_spread(events, hot, weights=weights)
     spread_small = bool(np.all(np.exp(var) <= opts.own_gate_max_spread))
     out_p, out_n, sd_p, sd_n, per = [], [], [], [], []
     for c in range(len(names)):
-        sel, frame_ok = _channel_pixels(sens, sat, between, chan, hot, c, names[c], opts, rng)
+        sel, frame_ok = channel_pixels(sens, sat, between, chan, hot, c, names[c], opts, rng)
         data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
                                opts.max_gap, neigh)
         gate = _gate_name(opts, gap)
@@ -514,7 +326,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     if opts.pixel_model != "auto":
         model = opts.pixel_model
     elif floor.onset_us > 0 and lin is not None:  # the frames tell the two pixels apart
-        test = _excess_test(frames, lin, events, hot, chan, names, opts,
+        test = excess_test(frames, lin, events, hot, chan, names, opts,
                             max(floor.onset_us, floor.step_us))
         beta = test["coefficient"]
         model = "reset" if beta is not None and beta > opts.excess_cut else "step"
@@ -578,16 +390,6 @@ def failed_channels(theta_pos: np.ndarray, theta_neg: np.ndarray, theta_range: t
     lo, hi = theta_range
     ok = [np.isfinite(v) & (v >= 0.5 * lo) & (v <= 2.0 * hi) for v in (theta_pos, theta_neg)]
     return ~(ok[0] & ok[1])
-
-
-def _compact(counts: np.ndarray) -> np.ndarray:
-    """int16 when every count fits (half the memory of a 1280x720 sensor's [M, 2, H*W] counts);
-    weighted (float) counts stay as they are."""
-    if counts.dtype.kind == "f":
-        return counts
-    if counts.size and int(np.abs(counts).max()) < np.iinfo(np.int16).max:
-        return counts.astype(np.int16)
-    return counts
 
 
 def _balance_ratio(events: EventStream, chan: np.ndarray, hot: np.ndarray, n_ch: int,

@@ -24,11 +24,34 @@ agreement) cannot do this: noisier weighted counts lower the correlation even wh
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
 
-from fusiongs.eval.calibrate_fit import PairData, _identified, log_sharp, moment_rows
+from fusiongs.errors import InputError
+from fusiongs.eval.calibrate_data import (
+    channel_pixels,
+    count_inputs,
+    gate_inputs,
+    prepare_channel,
+    saturated,
+    sensor_intensity,
+)
+from fusiongs.eval.calibrate_fit import (
+    PairData,
+    _identified,
+    iv_thresholds,
+    log_sharp,
+    moment_rows,
+    search_thresholds,
+)
+from fusiongs.events.stats import reset_weights
+from fusiongs.events.stream import EventStream
+from fusiongs.frames.frameset import FrameSet
+
+if TYPE_CHECKING:
+    from fusiongs.eval.calibrate import CalibrateOptions
 
 
 def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, float]]],
@@ -84,3 +107,39 @@ def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, flo
             return float("nan")
         beta = full[k - 1]
     return float(beta)
+
+
+def excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.ndarray,
+                 chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions,
+                 dead: float) -> dict:
+    """The pixel model's test of ``pixel_model="auto"``: the frames' coefficient on the crossings a
+    reset pixel's events would add (:func:`excess_coefficient`),
+    pooled over the channels with at least ``opts.excess_min_pairs`` gated pixel pairs; plain and
+    weighted counts on the same pixels with the gate at the dead time ``dead`` (µs)."""
+    rng = np.random.default_rng(opts.seed)
+    weights = reset_weights(events, dead, opts.reset_weight_cap)
+    sens = sensor_intensity(lin, events.cfa)
+    sat = saturated(lin, opts)
+    plain, weighted = count_inputs(frames, events, opts, None), count_inputs(frames, events, opts, weights)
+    _, _, bad_pair = gate_inputs(frames, events, opts, dead)
+    # A coarse start is enough: the IV re-solves from it (the coefficient, the model kept and the
+    # estimate were those of the full grid's start on 30 tuning and test scenes; RESULTS.md, s. 39).
+    quick = replace(opts, bootstrap=0, coarse_pixels=min(opts.coarse_pixels, 1000),
+                    coarse_steps=min(opts.coarse_steps, 9))
+    used, channels = [], []
+    for c, name in enumerate(names):
+        try:
+            sel, frame_ok = channel_pixels(sens, sat, plain[1], chan, hot, c, name, opts, rng)
+        except InputError:
+            continue
+        d0, d1 = (prepare_channel(sens, *inp[:2], sel, bad_pair, frame_ok, events.width, opts.tile,
+                                  opts.max_gap, inp[2]) for inp in (plain, weighted))
+        if int(d0.valid.sum()) < opts.excess_min_pairs:
+            continue
+        start = search_thresholds(d0, quick, rng, count_units=False, refine=False)
+        fit = iv_thresholds(d0, (start["theta_pos"], start["theta_neg"]), quick, rng)
+        used.append(name)
+        channels.append((d0, d1, (fit["theta_pos"], fit["theta_neg"])))
+    beta = excess_coefficient(channels)
+    return {"coefficient": beta if np.isfinite(beta) else None, "channels": used,
+            "dead_time_us": dead, "cut": opts.excess_cut}

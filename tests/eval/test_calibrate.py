@@ -10,7 +10,8 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, refractory_mask
+from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
+from fusiongs.eval.calibrate_data import refractory_mask
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.events.stats import IntervalFloor, dead_time_us, interval_floor
 from fusiongs.events.stats import spatial_hot_pixels as hot_pixels

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds, frame_pairs
+from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
+from fusiongs.eval.calibrate_data import frame_pairs
 from fusiongs.eval.calibrate_fit import PairData
 from fusiongs.eval.calibrate_model import excess_coefficient
 from fusiongs.sim.dvs import DVSParams
