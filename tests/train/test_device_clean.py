@@ -44,6 +44,8 @@ HOST_SIDE = {
     # threshold estimation (fusiongs calibrate) works on the numpy frames and events, once
     ("fusiongs/eval/calibrate.py", "*"): "host estimate before the loop",
     ("fusiongs/eval/calibrate_fit.py", "*"): "host estimate before the loop",
+    ("fusiongs/eval/calibrate_data.py", "*"): "host estimate before the loop",
+    ("fusiongs/eval/calibrate_model.py", "*"): "host estimate before the loop",
     # the plane-sweep stereo initialisation runs on the host by design (stereo_points moves its
     # inputs to the CPU), once; initial_gaussians moves its points to the device
     ("fusiongs/camera/stereo.py", "*"): "host plane sweep before the loop",
