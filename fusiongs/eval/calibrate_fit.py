@@ -206,21 +206,29 @@ def moment_rows(y: torch.Tensor, xs: list[torch.Tensor], zs: list[torch.Tensor],
     return torch.stack(rows, 1).to(torch.float64)
 
 
-def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
-                   ) -> torch.Tensor:
-    """Per-pixel sums of the instrumental-variable normal equations ``[P, K, K + 1]``.
+def iv_columns(data: PairData, dtype: torch.dtype, offsets: bool = True
+               ) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+    """The threshold fit's regressors and instruments, each ``[Q, P]``.
 
-    Regressors (``K`` = 4, or 2 without ``offsets``): ``N_+``, ``-N_-``, and the indicators
-    ``[N_+ > 0]``, ``-[N_- > 0]`` whose coefficients absorb the part of a threshold a pixel's
-    reference level had already covered (or still lacked) at the first frame; instruments: the
-    same functions of the neighbours' counts (:func:`moment_rows`).
+    Regressors (4, or 2 without ``offsets``): ``N_+``, ``-N_-``, and the indicators ``[N_+ > 0]``,
+    ``-[N_- > 0]`` whose coefficients absorb the part of a threshold a pixel's reference level had
+    already covered (or still lacked) at the first frame; instruments: the same functions of the
+    neighbours' counts.
     """
-    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]  # [Q, P]
     xs = [data.dn[:, 0], -data.dn[:, 1]]
     zs = [data.z[:, 0], -data.z[:, 1]]
     if offsets:
-        xs += [(data.dn[:, 0] > 0).to(y.dtype), -(data.dn[:, 1] > 0).to(y.dtype)]
-        zs += [(data.z[:, 0] > 0.5).to(y.dtype), -(data.z[:, 1] > 0.5).to(y.dtype)]
+        xs += [(data.dn[:, 0] > 0).to(dtype), -(data.dn[:, 1] > 0).to(dtype)]
+        zs += [(data.z[:, 0] > 0.5).to(dtype), -(data.z[:, 1] > 0.5).to(dtype)]
+    return xs, zs
+
+
+def _iv_pixel_sums(data: PairData, log_l: torch.Tensor, keep: torch.Tensor, offsets: bool = True
+                   ) -> torch.Tensor:
+    """Per-pixel sums of the instrumental-variable normal equations ``[P, K, K + 1]`` of the
+    regressors and instruments of :func:`iv_columns` (:func:`moment_rows`)."""
+    y = log_l[data.pairs[:, 1]] - log_l[data.pairs[:, 0]]  # [Q, P]
+    xs, zs = iv_columns(data, y.dtype, offsets)
     return moment_rows(y, xs, zs, keep)
 
 

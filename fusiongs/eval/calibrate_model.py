@@ -41,6 +41,7 @@ from fusiongs.eval.calibrate_data import (
 from fusiongs.eval.calibrate_fit import (
     PairData,
     _identified,
+    iv_columns,
     iv_thresholds,
     log_sharp,
     moment_rows,
@@ -66,7 +67,8 @@ def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, flo
 
     Returns:
         ``beta`` (dimensionless; about 1 for a reset pixel, 0 for one whose level keeps every
-        crossing), NaN when the pooled system is singular or there is no channel.
+        crossing), NaN when there is no channel, the pooled system is singular, or a channel's
+        thresholds come out non-positive.
 
     One block IV system: per channel its ON and OFF thresholds and the two indicator offsets of
     :func:`~fusiongs.eval.calibrate_fit.iv_thresholds` (each channel with its own per-pair offset),
@@ -87,11 +89,9 @@ def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, flo
             log_l = log_sharp(mixed, tp, tn)
             y = log_l[plain.pairs[:, 1]] - log_l[plain.pairs[:, 0]]
             ex, ez = weighted.dn - plain.dn, weighted.z - plain.z  # [Q, 2, P]
-            f = y.dtype
-            xs = [plain.dn[:, 0], -plain.dn[:, 1], (plain.dn[:, 0] > 0).to(f),
-                  -(plain.dn[:, 1] > 0).to(f), tp * ex[:, 0] - tn * ex[:, 1]]
-            zs = [plain.z[:, 0], -plain.z[:, 1], (plain.z[:, 0] > 0.5).to(f),
-                  -(plain.z[:, 1] > 0.5).to(f), tp * ez[:, 0] - tn * ez[:, 1]]
+            xs, zs = iv_columns(plain, y.dtype)
+            xs.append(tp * ex[:, 0] - tn * ex[:, 1])
+            zs.append(tp * ez[:, 0] - tn * ez[:, 1])
             m = moment_rows(y, xs, zs, plain.valid).sum(0)  # [5, 6]
             rows = torch.tensor(list(range(4 * c, 4 * c + 4)) + [k - 1])
             system[rows[:, None], torch.cat([rows, torch.tensor([k])])] += m
@@ -110,12 +110,16 @@ def excess_coefficient(channels: list[tuple[PairData, PairData, tuple[float, flo
 
 
 def excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.ndarray,
-                 chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions,
-                 dead: float) -> dict:
+                chan: np.ndarray, names: tuple[str, ...], opts: CalibrateOptions,
+                dead: float) -> dict:
     """The pixel model's test of ``pixel_model="auto"``: the frames' coefficient on the crossings a
-    reset pixel's events would add (:func:`excess_coefficient`),
-    pooled over the channels with at least ``opts.excess_min_pairs`` gated pixel pairs; plain and
-    weighted counts on the same pixels with the gate at the dead time ``dead`` (µs)."""
+    reset pixel's events would add (:func:`excess_coefficient`), pooled over the channels with at
+    least ``opts.excess_min_pairs`` gated pixel pairs; plain and weighted counts on the same pixels
+    with the gate at the dead time ``dead`` (µs).
+
+    Returns:
+        ``{"coefficient": beta or None, "channels": names used, "dead_time_us", "cut"}``.
+    """
     rng = np.random.default_rng(opts.seed)
     weights = reset_weights(events, dead, opts.reset_weight_cap)
     sens = sensor_intensity(lin, events.cfa)
