@@ -317,6 +317,12 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     if opts.pixel_model not in PIXEL_MODELS:
         raise InputError("calibrate", "pixel_model", f"one of {', '.join(PIXEL_MODELS)}",
                          repr(opts.pixel_model))
+    cut = opts.excess_cut
+    if isinstance(cut, bool) or not isinstance(cut, int | float) or not np.isfinite(cut):
+        raise InputError("calibrate", "excess_cut", "a finite number", repr(cut))
+    n = opts.excess_min_pairs
+    if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
+        raise InputError("calibrate", "excess_min_pairs", "a positive integer", repr(n))
     hot = spatial_hot_pixels(events, opts.hot_factor, opts.hot_floor)
     chan = pixel_channels(events)
     names = GREY_CHANNELS if events.cfa is None else RGB_CHANNELS

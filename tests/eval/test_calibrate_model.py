@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from fusiongs.errors import InputError
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 from fusiongs.eval.calibrate_data import frame_pairs
 from fusiongs.eval.calibrate_fit import PairData
@@ -85,3 +86,11 @@ def test_auto_keeps_the_pixel_model_the_sensor_has(reset):
                                                                         else "reset"))
     np.testing.assert_array_equal(th.theta_pos, forced.theta_pos)
     assert forced.details["pixel_model_test"] is None  # a forced model makes no test
+
+
+@pytest.mark.parametrize("field, value", [("excess_cut", float("nan")), ("excess_cut", "0.5"),
+                                          ("excess_min_pairs", 0), ("excess_min_pairs", 10.5)])
+def test_bad_test_options_are_refused_by_name(field, value):
+    sc = _scene(False)
+    with pytest.raises(InputError, match=field):
+        estimate_thresholds(sc.frames, sc.events, CalibrateOptions(**{field: value}))
