@@ -140,9 +140,16 @@ class CalibrateOptions:
             :func:`~fusiongs.events.stats.reset_weights` crossings, the gate kept), or ``"auto"``:
             with two frames or more and an onset, the frames' coefficient on the crossings the
             reset model adds is measured (:func:`fusiongs.eval.calibrate_model.excess_coefficient`)
-            and the reset model kept when it exceeds ``excess_cut``; otherwise ``"step"``.
+            and the reset model kept when it lies in ``(excess_cut, excess_max]``; otherwise
+            ``"step"``.
         excess_cut: the coefficient above which "auto" keeps the reset model: 0.5, halfway between
             the two models' values (1 for a reset pixel, 0 for the other), not tuned.
+        excess_max: the coefficient above which the measurement counts as failed and "auto" keeps
+            the step model: 2, as far above the reset value as the other model's value lies below
+            it. Under either model an extra crossing stands for at most about one threshold (the
+            reset pixel's capped weights allow a little more: 0.45-1.76 on the 24 reset-pixel
+            tuning and test scenes of session 39); tuning seed 333 (the simulator's pixel, dark
+            RGGB) measured 20.9 and read 25 % low with the reset model (RESULTS.md, session 40).
         excess_min_pairs: fewest gated pixel pairs for a channel to enter that measurement.
         reset_weight_cap: the largest weight of one event on a reset pixel.
         channel_prior: expected relative spread of the thresholds between CFA channels; each
@@ -188,6 +195,7 @@ class CalibrateOptions:
     dead_time_jump: float = 5.0
     pixel_model: str = "auto"
     excess_cut: float = 0.5
+    excess_max: float = 2.0
     excess_min_pairs: int = 1000
     reset_weight_cap: float = 4.0
     channel_prior: float = 0.05
@@ -320,6 +328,9 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     cut = opts.excess_cut
     if isinstance(cut, bool) or not isinstance(cut, int | float) or not np.isfinite(cut):
         raise InputError("calibrate", "excess_cut", "a finite number", repr(cut))
+    top = opts.excess_max
+    if isinstance(top, bool) or not isinstance(top, int | float) or not top > cut:
+        raise InputError("calibrate", "excess_max", f"a number above excess_cut ({cut})", repr(top))
     n = opts.excess_min_pairs
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise InputError("calibrate", "excess_min_pairs", "a positive integer", repr(n))
@@ -335,7 +346,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         test = excess_test(frames, lin, events, hot, chan, names, opts,
                             max(floor.onset_us, floor.step_us))
         beta = test["coefficient"]
-        model = "reset" if beta is not None and beta > opts.excess_cut else "step"
+        model = "reset" if beta is not None and cut < beta <= top else "step"
     else:
         model = "step"
     try:

@@ -118,7 +118,7 @@ def excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.
     with the gate at the dead time ``dead`` (µs).
 
     Returns:
-        ``{"coefficient": beta or None, "channels": names used, "dead_time_us", "cut"}``.
+        ``{"coefficient": beta or None, "channels": names used, "dead_time_us", "cut", "max"}``.
     """
     rng = np.random.default_rng(opts.seed)
     weights = reset_weights(events, dead, opts.reset_weight_cap)
@@ -146,4 +146,4 @@ def excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.
         channels.append((d0, d1, (fit["theta_pos"], fit["theta_neg"])))
     beta = excess_coefficient(channels)
     return {"coefficient": beta if np.isfinite(beta) else None, "channels": used,
-            "dead_time_us": dead, "cut": opts.excess_cut}
+            "dead_time_us": dead, "cut": opts.excess_cut, "max": opts.excess_max}

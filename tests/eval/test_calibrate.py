@@ -438,7 +438,7 @@ def test_pixel_models_auto_measures_the_model_and_forced_models_use_their_dead_t
     auto = estimate_thresholds(sc.frames, sc.events)
     test = auto.details["pixel_model_test"]
     assert auto.details["interval_floor_us"]["onset"] > 0 and np.isfinite(test["coefficient"])
-    kept = "reset" if test["coefficient"] > test["cut"] else "step"
+    kept = "reset" if test["cut"] < test["coefficient"] <= test["max"] else "step"
     assert auto.details["pixel_model"] == f"{kept} (auto)"
     forced = {m: estimate_thresholds(sc.frames, sc.events, CalibrateOptions(pixel_model=m))
               for m in ("step", "reset")}

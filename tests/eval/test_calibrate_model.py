@@ -79,7 +79,7 @@ def test_auto_keeps_the_pixel_model_the_sensor_has(reset):
     sc = _scene(reset)
     th = estimate_thresholds(sc.frames, sc.events)
     test = th.details["pixel_model_test"]
-    assert test["channels"] == ["grey"] and test["cut"] == 0.5
+    assert test["channels"] == ["grey"] and test["cut"] == 0.5 and test["max"] == 2.0
     assert (test["coefficient"] > 0.5) == reset, test
     assert th.details["pixel_model"] == ("reset (auto)" if reset else "step (auto)")
     forced = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(pixel_model="step" if not reset
@@ -88,8 +88,24 @@ def test_auto_keeps_the_pixel_model_the_sensor_has(reset):
     assert forced.details["pixel_model_test"] is None  # a forced model makes no test
 
 
+def test_a_coefficient_beyond_the_reset_value_is_a_failed_measurement():
+    """Above ``excess_max`` the coefficient says the test failed, not that the pixel is held in
+    reset: "auto" keeps the step model (the same coefficient, measured again, just inside keeps
+    the reset model)."""
+    sc = _scene(True)
+    beta = estimate_thresholds(sc.frames, sc.events).details["pixel_model_test"]["coefficient"]
+    assert beta > 0.9
+    below = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(excess_max=0.9 * beta))
+    inside = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(excess_max=beta))
+    assert below.details["pixel_model"] == "step (auto)"
+    assert inside.details["pixel_model"] == "reset (auto)"
+    assert below.details["pixel_model_test"]["coefficient"] == beta
+
+
 @pytest.mark.parametrize("field, value", [("excess_cut", float("nan")), ("excess_cut", "0.5"),
-                                          ("excess_min_pairs", 0), ("excess_min_pairs", 10.5)])
+                                          ("excess_min_pairs", 0), ("excess_min_pairs", 10.5),
+                                          ("excess_max", float("nan")), ("excess_max", 0.4),
+                                          ("excess_max", "2")])
 def test_bad_test_options_are_refused_by_name(field, value):
     sc = _scene(False)
     with pytest.raises(InputError, match=field):
