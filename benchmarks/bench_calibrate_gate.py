@@ -108,6 +108,10 @@ def main(argv=None) -> int:
                    help="where the dead-time-free twins are written (reused when present)")
     p.add_argument("--json", type=Path, default=None, help="append one JSON line per row")
     args = p.parse_args(argv)
+    for scene in args.scenes:
+        if not (scene / "gt" / "sim.json").is_file():
+            p.error(f"{scene}: expected a scene of fusiongs simulate (its gt/sim.json is read to make "
+                    "the twin and score it); not found")
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from bench_event_only_diagnose import resimulate
 

@@ -329,8 +329,10 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     if isinstance(cut, bool) or not isinstance(cut, int | float) or not np.isfinite(cut):
         raise InputError("calibrate", "excess_cut", "a finite number", repr(cut))
     top = opts.excess_max
-    if isinstance(top, bool) or not isinstance(top, int | float) or not top > cut:
-        raise InputError("calibrate", "excess_max", f"a number above excess_cut ({cut})", repr(top))
+    if (isinstance(top, bool) or not isinstance(top, int | float) or not np.isfinite(top)
+            or not top > cut):  # finite: it is written to calibration.json, which is strict JSON
+        raise InputError("calibrate", "excess_max", f"a finite number above excess_cut ({cut})",
+                         repr(top))
     n = opts.excess_min_pairs
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise InputError("calibrate", "excess_min_pairs", "a positive integer", repr(n))

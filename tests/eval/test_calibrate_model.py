@@ -105,7 +105,7 @@ def test_a_coefficient_beyond_the_reset_value_is_a_failed_measurement():
 @pytest.mark.parametrize("field, value", [("excess_cut", float("nan")), ("excess_cut", "0.5"),
                                           ("excess_min_pairs", 0), ("excess_min_pairs", 10.5),
                                           ("excess_max", float("nan")), ("excess_max", 0.4),
-                                          ("excess_max", "2")])
+                                          ("excess_max", "2"), ("excess_max", float("inf"))])
 def test_bad_test_options_are_refused_by_name(field, value):
     sc = _scene(False)
     with pytest.raises(InputError, match=field):

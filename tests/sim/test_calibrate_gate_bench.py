@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import fusiongs.eval.calibrate as calibrate
-from benchmarks.bench_calibrate_gate import estimate_with_gate
+from benchmarks.bench_calibrate_gate import estimate_with_gate, main
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 from fusiongs.events.stream import EventStream
 from fusiongs.sim.dvs import DVSParams
@@ -68,3 +68,11 @@ def test_the_gate_follows_the_other_streams_fast_events(scene):
     own = estimate_thresholds(scene.frames, ev, STEP)
     assert other.details["dead_time_us"] == own.details["dead_time_us"] > 0
     assert other.details["per_channel"][0]["kept"] > own.details["per_channel"][0]["kept"]
+
+
+def test_a_scene_without_truth_is_refused_in_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path / "recording"), "--twins", str(tmp_path / "twins")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "recording" in err and "gt/sim.json" in err
