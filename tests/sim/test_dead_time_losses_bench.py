@@ -9,6 +9,7 @@ from benchmarks.bench_dead_time_losses import (
     dead_time_count,
     dilate,
     lost_crossings,
+    path_count,
     previous_gap,
     true_fast_steps,
     window_table,
@@ -119,3 +120,44 @@ def test_window_table_predicts_lost_counts_better_with_the_dead_time_law():
     plain = tab["predictions"]["ΔL / θ"]["lost"][0]
     grid = tab["predictions"]["dead-time law, grid pixel (the simulator's)"]["lost"][0]
     assert grid <= plain
+
+
+def test_path_count_is_the_plain_change_without_dead_time_and_follows_the_simulators_pixel():
+    from benchmarks.bench_event_only_diagnose import TrueLog
+    from fusiongs.sim import dvs
+
+    times = np.linspace(0.0, 0.01, 11)
+    rng = np.random.default_rng(0)
+    logs = np.cumsum(rng.normal(0.0, 0.3, (11, 4)), axis=0)
+    truth, th = TrueLog(times, logs), np.full(4, 0.2)
+    for pixel in ("grid", "reset"):
+        for renders in (None, 3):
+            n = path_count(truth, 0.0013, 0.0087, th, th, 0.0, pixel, renders)
+            assert np.allclose(n, (truth.at(0.0087) - truth.at(0.0013)).numpy() / 0.2)
+    # ramps in intensity from near black (fastest in log first): the law along the renders the
+    # simulator's pixel model saw predicts its emitted count; the two end levels do worse
+    for i0, i1, dur, dead in [(0.002, 0.8, 0.01, 1e-3), (0.8, 0.002, 0.01, 1e-3), (0.05, 0.5, 0.02, 5e-4)]:
+        t = np.linspace(0.0, dur, 401)
+        ramp = np.log(i0 + (i1 - i0) * t / dur + 1e-3)[:, None]
+        one = np.array([0.2])
+        emitted = int(dvs.dvs_events(ramp.astype(np.float32), t, one, one, dead)[2].sum())
+        path = float(path_count(TrueLog(t, ramp), 0.0, dur, one, one, dead, "grid")[0])
+        ends = float(dead_time_count(ramp[:1, 0], ramp[-1:, 0], dur, one, one, dead, "grid")[0])
+        assert abs(path - emitted) < 1.0, (i0, i1, path, emitted)
+        assert abs(path - emitted) <= abs(ends - emitted) + 1e-9
+        reset = float(path_count(TrueLog(t, ramp), 0.0, dur, one, one, dead, "reset")[0])
+        assert abs(reset) <= abs(path) + 1e-9  # a reset pixel loses at least as much
+    try:
+        path_count(truth, 0.0, 0.01, th, th, 1e-3, "other")
+    except ValueError as exc:
+        assert "pixel" in str(exc)
+    else:
+        raise AssertionError("an unknown pixel model must be refused")
+
+
+def test_window_table_predicts_lost_counts_best_along_the_truths_renders():
+    tab = window_table(_streams(), 200, 0)
+    ends = tab["predictions"]["dead-time law, grid pixel (the simulator's)"]["lost"][0]
+    path = tab["predictions"]["law along the truth's renders, grid pixel"]["lost"][0]
+    plain = tab["predictions"]["ΔL / θ"]["lost"][0]
+    assert path < plain and path <= ends + 1e-9
