@@ -142,6 +142,8 @@ def path_count(truth: TrueLog, t_a: float, t_b: float, theta_on: np.ndarray, the
     """
     if pixel not in ("grid", "reset"):
         raise ValueError(f"pixel: expected 'reset' or 'grid', got {pixel!r}")
+    if renders is not None and (isinstance(renders, bool) or int(renders) != renders or renders < 1):
+        raise ValueError(f"renders: expected None or an integer >= 1, got {renders!r}")
     if renders is None:
         inner = truth.times[(truth.times > t_a) & (truth.times < t_b)]
         instants = np.concatenate([[t_a], inner, [t_b]])

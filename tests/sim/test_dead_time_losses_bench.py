@@ -146,6 +146,9 @@ def test_path_count_is_the_plain_change_without_dead_time_and_follows_the_simula
         assert abs(reset) <= abs(path) + 1e-9  # a reset pixel loses at least as much
     with pytest.raises(ValueError, match="pixel"):  # an unknown pixel model is refused
         path_count(truth, 0.0, 0.01, th, th, 1e-3, "other")
+    for bad in (0, -2, 2.5):  # no step at all would sum to a silent zero
+        with pytest.raises(ValueError, match="renders"):
+            path_count(truth, 0.0, 0.01, th, th, 1e-3, "grid", bad)
 
 
 def test_window_table_predicts_lost_counts_best_along_the_truths_renders():
