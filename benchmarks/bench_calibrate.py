@@ -56,6 +56,12 @@ def scene_for(root: Path, seed: int, split: str) -> Path:
     return path
 
 
+def relative_errors(est, truth) -> tuple[np.ndarray, np.ndarray]:
+    """``(ON, OFF)`` relative errors ``[C]`` each of an estimate against the truth
+    (:class:`~fusiongs.events.thresholds.SensorThresholds` both)."""
+    return est.theta_pos / truth.theta_pos - 1, est.theta_neg / truth.theta_neg - 1
+
+
 def calibrate_row(scene_dir: Path, opts: CalibrateOptions) -> dict:
     """Estimate on one scene: truth, estimate, relative errors and seconds."""
     scene = load_scene(scene_dir)
@@ -64,8 +70,7 @@ def calibrate_row(scene_dir: Path, opts: CalibrateOptions) -> dict:
     seconds = time.perf_counter() - t0
     truth = true_thresholds(scene_dir, scene.events.cfa)
     facts = read_sim_facts(scene_dir) or {}
-    err_p = est.theta_pos / truth.theta_pos - 1
-    err_n = est.theta_neg / truth.theta_neg - 1
+    err_p, err_n = relative_errors(est, truth)
     return {"scene": scene_dir.name, "preset": facts.get("preset"), "cfa": scene.events.cfa or "grey",
             "response": scene.frames.response, "events": len(scene.events),
             "sensor": {k: facts.get(k) for k in ("theta_sigma", "refractory_s", "ba_rate_hz",

@@ -37,7 +37,9 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import fusiongs.eval.calibrate as calibrate  # noqa: E402
+from benchmarks.bench_calibrate import relative_errors  # noqa: E402
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds  # noqa: E402
 from fusiongs.eval.calibrate_data import gate_inputs  # noqa: E402
 from fusiongs.events.stats import interval_floor  # noqa: E402
@@ -72,7 +74,7 @@ def estimate_with_gate(frames: FrameSet, events: EventStream, gate_events: Event
 
 def errors(est, truth) -> np.ndarray:
     """Relative errors ``[2 C]`` (ON per channel, then OFF per channel)."""
-    return np.concatenate([est.theta_pos / truth.theta_pos - 1, est.theta_neg / truth.theta_neg - 1])
+    return np.concatenate(relative_errors(est, truth))
 
 
 def rows(scene: Path, twin: Path) -> list[dict]:

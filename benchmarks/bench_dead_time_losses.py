@@ -130,18 +130,21 @@ def path_count(truth: TrueLog, t_a: float, t_b: float, theta_on: np.ndarray, the
                dead_s: float, pixel: str = "grid", renders: int | None = None) -> np.ndarray:
     """Expected signed count of each pixel over ``[t_a, t_b]`` s from its log intensity *inside*
     the window: the dead-time law of :func:`dead_time_count` applied on each step of a piecewise
-    linear log trajectory and summed.
+    linear log trajectory and summed (:func:`path_levels`, then :func:`law_along`).
 
-    Each step's change ``δ`` is ``c = |δ| / θ`` crossings at the rate ``r = c / Δt``; a ``"grid"``
-    pixel (this project's simulator) emits ``c / (r d + 1/2)`` of them where ``r d > 1/2`` (all
-    below), a ``"reset"`` pixel ``c / (1 + r d)``. With ``renders=None`` the steps are the
-    truth's own render instants inside the window (the simulator's 1 kHz renders: the rate a
-    model of the losses could at best know); with ``renders=K`` they are ``K`` equal steps between
-    ``K + 1`` instants (what ``K + 1`` renders a training window would show). Without a dead time
-    it is the plain ``Σ δ / θ`` (``[P]`` float64).
+    With ``renders=None`` the steps are the truth's own render instants inside the window (the
+    simulator's 1 kHz renders: the rate a model of the losses could at best know); with
+    ``renders=K`` they are ``K`` equal steps between ``K + 1`` instants (what ``K + 1`` renders a
+    training window would show). Without a dead time it is the plain ``Σ δ / θ`` (``[P]`` float64).
     """
-    if pixel not in ("grid", "reset"):
-        raise ValueError(f"pixel: expected 'reset' or 'grid', got {pixel!r}")
+    instants, levels = path_levels(truth, t_a, t_b, renders)
+    return law_along(instants, levels, theta_on, theta_off, dead_s, pixel)
+
+
+def path_levels(truth: TrueLog, t_a: float, t_b: float, renders: int | None = None
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``(instants [K + 1] s, true log intensity [K + 1, P] float64)`` of a window: its two ends and
+    the truth's render instants between them (``renders=None``), or ``renders + 1`` equal steps."""
     if renders is not None and (isinstance(renders, bool) or int(renders) != renders or renders < 1):
         raise ValueError(f"renders: expected None or an integer >= 1, got {renders!r}")
     if renders is None:
@@ -149,7 +152,17 @@ def path_count(truth: TrueLog, t_a: float, t_b: float, theta_on: np.ndarray, the
         instants = np.concatenate([[t_a], inner, [t_b]])
     else:
         instants = np.linspace(t_a, t_b, renders + 1)
-    levels = np.stack([truth.at(float(t)).numpy().astype(np.float64) for t in instants])
+    return instants, np.stack([truth.at(float(t)).numpy().astype(np.float64) for t in instants])
+
+
+def law_along(instants: np.ndarray, levels: np.ndarray, theta_on: np.ndarray, theta_off: np.ndarray,
+              dead_s: float, pixel: str = "grid") -> np.ndarray:
+    """``[P]`` signed emitted count along a piecewise linear log trajectory (``levels [K + 1, P]`` at
+    ``instants [K + 1]`` s). Each step's change ``δ`` is ``c = |δ| / θ`` crossings at the rate
+    ``r = c / Δt``; a ``"grid"`` pixel (this project's simulator) emits ``c / (r d + 1/2)`` of them
+    where ``r d > 1/2`` (all below), a ``"reset"`` pixel ``c / (1 + r d)``."""
+    if pixel not in ("grid", "reset"):
+        raise ValueError(f"pixel: expected 'reset' or 'grid', got {pixel!r}")
     delta, dt = np.diff(levels, axis=0), np.diff(instants)[:, None]
     c = np.abs(delta) / np.where(delta > 0, theta_on, theta_off)
     rd = c / np.maximum(dt, 1e-12) * dead_s
@@ -227,7 +240,8 @@ def window_table(s: dict, n_windows: int, seed: int) -> dict:
         plain = (lb - la) / np.where(lb > la, th_on, th_off)
         laws = [dead_time_count(la, lb, dur, th_on, th_off, r * 1e-6, k) for k in ("reset", "grid")]
         span_s = (ta * 1e-6, tb * 1e-6)
-        laws += [path_count(truth, *span_s, th_on, th_off, r * 1e-6, k) for k in ("reset", "grid")]
+        inside = path_levels(truth, *span_s)  # read once, for both pixel models
+        laws += [law_along(*inside, th_on, th_off, r * 1e-6, k) for k in ("reset", "grid")]
         laws += [path_count(truth, *span_s, th_on, th_off, r * 1e-6, "grid", k) for k in (4, 8)]
         # errors in the direction of the pixel's change (positive: the prediction is too large)
         sgn = np.where(lb >= la, 1.0, -1.0)

@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         beta = test.get("coefficient")
         print("pixel model test: the frames' coefficient on the crossings a reset pixel's events add: "
               + (f"{beta:.2f}" if isinstance(beta, int | float) else "not measurable")
-              + f" (reset above {test['cut']} up to {test.get('max', 'any')}; channels "
+              + f" (reset above {test['cut']} up to {test['max']}; channels "
               f"{', '.join(test['channels']) or 'none'})")
     spread = th.details.get("threshold_spread")
     if isinstance(spread, dict):
