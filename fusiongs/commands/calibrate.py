@@ -75,8 +75,9 @@ def run(args: argparse.Namespace) -> int:
               if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
     if str(th.details.get("pixel_model", "")).startswith("reset") and dead:
+        end = " (+ the blind time after a burst's last event)" if th.details.get("reset_burst_end") else ""
         print("pixel model: reset (held in reset during its dead time): each event counted as the "
-              "threshold crossings it stands for, interval / (interval - dead time)")
+              f"threshold crossings it stands for, interval / (interval - dead time){end}")
     test = th.details.get("pixel_model_test")
     if isinstance(test, dict):
         beta = test.get("coefficient")

@@ -36,8 +36,9 @@ uncertainty is a bootstrap over spatial tiles.
 A DVS pixel held in reset during its dead time (Lichtsteiner et al., IEEE JSSC 2008) loses all
 the change of its blind time, not only the events: every event on a fast edge stands for more
 than one threshold, and pixels a few dead times apart lose 20-50 % of their change, which the gate
-does not reach. Under that pixel model each event counts ``Δt / (Δt - d)`` crossings
-(:func:`fusiongs.events.stats.reset_weights`) in every count below, ``d`` the onset of the
+does not reach. Under that pixel model each event counts ``Δt / (Δt - d)`` crossings, and the last
+event of a burst also the change expected in the blind time after it
+(:func:`fusiongs.events.stats.reset_weights`), in every count below, ``d`` the onset of the
 intervals (:func:`fusiongs.events.stats.interval_floor`). The intervals alone cannot tell such a
 pixel from one whose level keeps every crossing (a scene's fastest edge also makes a floor, and a
 reset pixel on sharp edges also makes a step), so with frames and an onset ``pixel_model="auto"``
@@ -152,6 +153,9 @@ class CalibrateOptions:
             RGGB) measured 20.9 and read 25 % low with the reset model (RESULTS.md, session 40).
         excess_min_pairs: fewest gated pixel pairs for a channel to enter that measurement.
         reset_weight_cap: the largest weight of one event on a reset pixel.
+        reset_burst_end: count the blind time after a burst's last event too
+            (:func:`~fusiongs.events.stats.reset_weights` ``burst_end``; RESULTS.md, session 42);
+            written to calibration.json, where deblur and edi read it.
         channel_prior: expected relative spread of the thresholds between CFA channels; each
             channel's estimate is pooled with the others by its precision
             (:func:`shrink_channels`; 0 keeps every channel on its own).
@@ -198,6 +202,7 @@ class CalibrateOptions:
     excess_max: float = 2.0
     excess_min_pairs: int = 1000
     reset_weight_cap: float = 4.0
+    reset_burst_end: bool = True
     channel_prior: float = 0.05
     channel_outlier: float = 2.0
     max_gap: int = 4
@@ -253,7 +258,8 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
     dead time ``dead`` (µs; also the refractory gate's unit). Returns the fits, the threshold
     spread and the mean over channels of the fits' agreement (-inf without frames)."""
     rng = np.random.default_rng(opts.seed)
-    weights = reset_weights(events, dead, opts.reset_weight_cap) if reset and dead > 0 else None
+    weights = (reset_weights(events, dead, opts.reset_weight_cap, opts.reset_burst_end)
+               if reset and dead > 0 else None)
     ratio = _balance_ratio(events, chan, hot, len(names), opts, rng, weights)
     if lin is None:
         return {"ratio": ratio, "dead": dead, "agreement": -np.inf}
@@ -333,6 +339,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
             or not top > cut):  # finite: it is written to calibration.json, which is strict JSON
         raise InputError("calibrate", "excess_max", f"a finite number above excess_cut ({cut})",
                          repr(top))
+    if not isinstance(opts.reset_burst_end, bool):
+        raise InputError("calibrate", "reset_burst_end", "true or false", repr(opts.reset_burst_end))
     n = opts.excess_min_pairs
     if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 1:
         raise InputError("calibrate", "excess_min_pairs", "a positive integer", repr(n))
@@ -367,6 +375,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us}}
     if model == "reset":
         details["reset_weight_cap"] = opts.reset_weight_cap
+        details["reset_burst_end"] = opts.reset_burst_end
     if len(frames) < 2:
         return _without_pairs(frames, events, names, ratio, opts, details)
     per, var, n_spread = fit["per"], fit["var"], fit["n_spread"]

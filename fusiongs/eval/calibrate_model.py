@@ -121,7 +121,7 @@ def excess_test(frames: FrameSet, lin: np.ndarray, events: EventStream, hot: np.
         ``{"coefficient": beta or None, "channels": names used, "dead_time_us", "cut", "max"}``.
     """
     rng = np.random.default_rng(opts.seed)
-    weights = reset_weights(events, dead, opts.reset_weight_cap)
+    weights = reset_weights(events, dead, opts.reset_weight_cap, opts.reset_burst_end)
     sens = sensor_intensity(lin, events.cfa)
     sat = saturated(lin, opts)
     plain, weighted = count_inputs(frames, events, opts, None), count_inputs(frames, events, opts, weights)

@@ -69,9 +69,11 @@ def fast_mask(t, x, y, width, hw, gap, out):  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def reset_weights(t, x, y, width, hw, dead, cap, out):  # pragma: no cover - numba
-    """``out[i]`` = ``min(dt / (dt - dead), cap)`` for event ``i`` ``dt`` µs after its pixel's
-    previous event with ``dt > dead``; left as it is (1) otherwise."""
+def reset_weights(t, x, y, width, hw, dead, cap, burst_end, out):  # pragma: no cover - numba
+    """``out[i]`` = ``w_i = min(dt / (dt - dead), cap)`` for event ``i`` ``dt`` µs after its pixel's
+    previous event with ``dt > dead``; left as it is (1) otherwise. With ``burst_end`` a second pass
+    (backwards in time) adds ``max(0, (w_i^2 - 1) / (2 w_i) - (w_next - 1))``, ``w_next`` the first
+    pass's weight of the pixel's next event (1 when there is none)."""
     last = np.zeros(hw, np.int64)
     seen = np.zeros(hw, np.bool_)
     for i in range(t.shape[0]):
@@ -82,6 +84,16 @@ def reset_weights(t, x, y, width, hw, dead, cap, out):  # pragma: no cover - num
                 out[i] = min(dt / (dt - dead), cap)
         last[k] = t[i]
         seen[k] = True
+    if not burst_end:
+        return
+    nxt = np.ones(hw, np.float64)
+    for i in range(t.shape[0] - 1, -1, -1):
+        k = np.int64(y[i]) * width + np.int64(x[i])
+        w = float(out[i])
+        extra = (w * w - 1.0) / (2.0 * w) - (nxt[k] - 1.0)
+        nxt[k] = w
+        if extra > 0.0:
+            out[i] = w + extra
 
 
 @njit(cache=True)

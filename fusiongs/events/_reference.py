@@ -36,15 +36,23 @@ def interval_histogram(events: EventStream, edges: np.ndarray) -> tuple[np.ndarr
     return np.histogram(dt, edges)[0], int(dt.size)
 
 
-def reset_weights(events: EventStream, dead_us: float, cap: float) -> np.ndarray:
-    """``[E]`` float64 ``min(dt / (dt - d), cap)`` where the interval ``dt`` to the pixel's previous
-    event exceeds ``d``, else 1."""
+def reset_weights(events: EventStream, dead_us: float, cap: float, burst_end: bool = False) -> np.ndarray:
+    """``[E]`` float64 ``w = min(dt / (dt - d), cap)`` where the interval ``dt`` to the pixel's
+    previous event exceeds ``d``, else 1; with ``burst_end``, plus ``max(0, (w^2 - 1) / (2 w) -
+    (w_next - 1))`` with ``w_next`` the pixel's next event's ``w`` (1 for its last event)."""
     w = np.ones(len(events))
     dt, idx = same_pixel_intervals(events)
     dt = dt.astype(np.float64)
     over = dt > dead_us
     w[idx[over]] = np.minimum(dt[over] / (dt[over] - dead_us), cap)
-    return w
+    if not burst_end:
+        return w
+    pix = events.y.astype(np.int64) * events.width + events.x
+    order = np.argsort(pix, kind="stable")  # time order kept within each pixel
+    w_next = np.ones(len(events))
+    same = pix[order][1:] == pix[order][:-1]
+    w_next[order[:-1][same]] = w[order[1:][same]]
+    return w + np.maximum(0.0, (w * w - 1.0) / (2.0 * w) - (w_next - 1.0))
 
 
 def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:

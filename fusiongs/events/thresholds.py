@@ -177,27 +177,31 @@ def detail_number(thresholds: SensorThresholds, key: str) -> float | None:
 
 
 def reset_model_parameters(thresholds: SensorThresholds, where: str | Path = "calibration"
-                           ) -> tuple[float, float] | None:
-    """``(dead time µs, weight cap)`` when the calibration chose the pixel model of a pixel held in
-    reset (its details' ``pixel_model``, ``dead_time_us`` and ``reset_weight_cap``, default cap 4),
-    else None.
+                           ) -> tuple[float, float, bool] | None:
+    """``(dead time µs, weight cap, burst end)`` when the calibration chose the pixel model of a
+    pixel held in reset (its details' ``pixel_model``, ``dead_time_us``, ``reset_weight_cap``,
+    default cap 4, and ``reset_burst_end``: the weights of :func:`fusiongs.events.stats.reset_weights`
+    that it was estimated with; a file without it is from before that term, so False), else None.
 
     Raises:
         InputError: naming ``where`` (the file, when read from one), for a reset calibration whose
-            dead time or cap is not a valid number.
+            dead time, cap or burst-end flag is not valid.
     """
     model = thresholds.details.get("pixel_model")
     if not (isinstance(model, str) and model.startswith("reset")):
         return None
     dead = detail_number(thresholds, "dead_time_us")
     cap = detail_number(thresholds, "reset_weight_cap") if "reset_weight_cap" in thresholds.details else 4.0
+    burst_end = thresholds.details.get("reset_burst_end", False)
     if dead is None or dead < 0:
         raise InputError(where, "details.dead_time_us", "a dead time >= 0 (µs) for the reset pixel model",
                          repr(thresholds.details.get("dead_time_us")))
     if cap is None or cap < 1:
         raise InputError(where, "details.reset_weight_cap", "a number >= 1",
                          repr(thresholds.details.get("reset_weight_cap")))
-    return dead, cap
+    if not isinstance(burst_end, bool):
+        raise InputError(where, "details.reset_burst_end", "true or false", repr(burst_end))
+    return dead, cap, burst_end
 
 
 def calibration_event_weights(events, thresholds) -> np.ndarray | None:

@@ -86,6 +86,12 @@ def test_auto_keeps_the_pixel_model_the_sensor_has(reset):
                                                                         else "reset"))
     np.testing.assert_array_equal(th.theta_pos, forced.theta_pos)
     assert forced.details["pixel_model_test"] is None  # a forced model makes no test
+    assert th.details.get("reset_burst_end") is (True if reset else None)  # for deblur and edi
+    if reset:  # the burst's end reaches the fit, and is written with it
+        plain = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(pixel_model="reset",
+                                                                           reset_burst_end=False))
+        assert plain.details["reset_burst_end"] is False
+        assert not np.array_equal(plain.theta_pos, th.theta_pos)
 
 
 def test_a_coefficient_beyond_the_reset_value_is_a_failed_measurement():
@@ -105,7 +111,8 @@ def test_a_coefficient_beyond_the_reset_value_is_a_failed_measurement():
 @pytest.mark.parametrize("field, value", [("excess_cut", float("nan")), ("excess_cut", "0.5"),
                                           ("excess_min_pairs", 0), ("excess_min_pairs", 10.5),
                                           ("excess_max", float("nan")), ("excess_max", 0.4),
-                                          ("excess_max", "2"), ("excess_max", float("inf"))])
+                                          ("excess_max", "2"), ("excess_max", float("inf")),
+                                          ("reset_burst_end", 1), ("reset_burst_end", "true")])
 def test_bad_test_options_are_refused_by_name(field, value):
     sc = _scene(False)
     with pytest.raises(InputError, match=field):

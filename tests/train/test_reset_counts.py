@@ -48,11 +48,20 @@ def test_only_a_reset_calibration_weighs_the_events(data):
     assert reset_event_weights(data, _theta(), CPU) is None
     assert reset_event_weights(data, _theta(pixel_model="step (auto)", dead_time_us=400.0), CPU) is None
     assert reset_event_weights(data, _theta(pixel_model="reset", dead_time_us=0.0), CPU) is None
-    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0)
+    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0, reset_burst_end=True)
     w = reset_event_weights(data, th, CPU)
     assert w.dtype == torch.float32 and w.device == CPU and w.shape == (len(data.events),)
-    np.testing.assert_array_equal(w.numpy(), reset_weights(data.events, 400.0, 3.0))
-    assert float(w.max()) > 1.0 and float(w.max()) <= 3.0
+    np.testing.assert_array_equal(w.numpy(), reset_weights(data.events, 400.0, 3.0, burst_end=True))
+    assert float(w.max()) > 1.0 and float(w.max()) <= 3.0 + 8.0 / 6.0 + 1e-5
+
+
+def test_a_calibration_from_before_the_burst_end_keeps_its_weights(data):
+    """A reset calibration without ``reset_burst_end`` was estimated without that term, and is
+    counted without it."""
+    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0)
+    w = reset_event_weights(data, th, CPU)
+    np.testing.assert_array_equal(w.numpy(), reset_weights(data.events, 400.0, 3.0, burst_end=False))
+    assert float(w.max()) <= 3.0
 
 
 def test_weighted_counts_in_every_window_and_their_cumulative_sums(data):
@@ -79,6 +88,8 @@ def test_weighted_counts_in_every_window_and_their_cumulative_sums(data):
     ({"pixel_model": "reset", "dead_time_us": -5.0}, "dead_time_us"),
     ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_weight_cap": "x"}, "reset_weight_cap"),
     ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_weight_cap": 0.5}, "reset_weight_cap"),
+    ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_burst_end": "yes"}, "reset_burst_end"),
+    ({"pixel_model": "reset", "dead_time_us": 400.0, "reset_burst_end": 1}, "reset_burst_end"),
 ])
 def test_a_reset_calibration_from_elsewhere_with_a_bad_number_is_a_named_error(data, details, field):
     from fusiongs.errors import InputError
@@ -90,9 +101,9 @@ def test_a_reset_calibration_from_elsewhere_with_a_bad_number_is_a_named_error(d
 def test_edi_counts_a_reset_pixels_events_as_the_calibration_did(scene):
     from fusiongs.eval.edi import edi_deblur, edi_scene
 
-    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0)
+    th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0, reset_burst_end=True)
     got = edi_scene(scene, th, n_samples=8)
-    w = reset_weights(scene.events, 400.0, 3.0)
+    w = reset_weights(scene.events, 400.0, 3.0, burst_end=True)
     fs, lin = scene.frames, scene.frames.to_linear()
     want = np.stack([edi_deblur(lin[i], scene.events, float(fs.t_start[i]), float(fs.t_end[i]), th, 8, w)
                      for i in range(len(fs))])
