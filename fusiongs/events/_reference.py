@@ -21,18 +21,18 @@ def count_maps(events: EventStream, i0: int = 0, i1: int | None = None,
     return np.bincount(idx, w, minlength=2 * hw).reshape(2, events.height, events.width)
 
 
-def same_pixel_intervals(events: EventStream) -> tuple[np.ndarray, np.ndarray]:
-    """``(dt, index)``: the interval of every event after its pixel's previous one (µs) and the
-    event's index in the stream, from a stable sort by pixel."""
+def same_pixel_intervals(events: EventStream) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(dt, index, previous)``: the interval of every event after its pixel's previous one (µs),
+    the event's index in the stream and that previous event's index, from a stable sort by pixel."""
     pix = events.y.astype(np.int64) * events.width + events.x
     order = np.argsort(pix, kind="stable")  # time order kept within each pixel
     ps, ts = pix[order], events.t[order]
     same = ps[1:] == ps[:-1]
-    return (ts[1:] - ts[:-1])[same], order[1:][same]
+    return (ts[1:] - ts[:-1])[same], order[1:][same], order[:-1][same]
 
 
 def interval_histogram(events: EventStream, edges: np.ndarray) -> tuple[np.ndarray, int]:
-    dt, _ = same_pixel_intervals(events)
+    dt, _, _ = same_pixel_intervals(events)
     return np.histogram(dt, edges)[0], int(dt.size)
 
 
@@ -41,23 +41,20 @@ def reset_weights(events: EventStream, dead_us: float, cap: float, burst_end: bo
     previous event exceeds ``d``, else 1; with ``burst_end``, plus ``max(0, (w^2 - 1) / (2 w) -
     (w_next - 1))`` with ``w_next`` the pixel's next event's ``w`` (1 for its last event)."""
     w = np.ones(len(events))
-    dt, idx = same_pixel_intervals(events)
+    dt, idx, prev = same_pixel_intervals(events)
     dt = dt.astype(np.float64)
     over = dt > dead_us
     w[idx[over]] = np.minimum(dt[over] / (dt[over] - dead_us), cap)
     if not burst_end:
         return w
-    pix = events.y.astype(np.int64) * events.width + events.x
-    order = np.argsort(pix, kind="stable")  # time order kept within each pixel
     w_next = np.ones(len(events))
-    same = pix[order][1:] == pix[order][:-1]
-    w_next[order[:-1][same]] = w[order[1:][same]]
+    w_next[prev] = w[idx]
     return w + np.maximum(0.0, (w * w - 1.0) / (2.0 * w) - (w_next - 1.0))
 
 
 def fast_event_mask(events: EventStream, gap_us: float) -> np.ndarray:
     fast = np.zeros(len(events), bool)
-    dt, idx = same_pixel_intervals(events)
+    dt, idx, _ = same_pixel_intervals(events)
     fast[idx] = dt < gap_us
     return fast
 
