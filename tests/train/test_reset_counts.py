@@ -133,3 +133,7 @@ def test_a_calibration_file_with_a_bad_reset_dead_time_is_refused_naming_the_fil
         read_calibration(path)
     good = write_calibration(tmp_path / "good.json", _theta(pixel_model="reset", dead_time_us=400.0))
     assert read_calibration(good)[0].details["dead_time_us"] == 400.0
+    flag = write_calibration(tmp_path / "flag.json", _theta(pixel_model="reset", dead_time_us=400.0,
+                                                            reset_burst_end="yes"))
+    with pytest.raises(InputError, match=r"flag\.json: details\.reset_burst_end"):
+        read_calibration(flag)
