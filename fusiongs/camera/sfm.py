@@ -210,7 +210,9 @@ def pair_rotation(xy_i: np.ndarray, xy_j: np.ndarray, K: np.ndarray, trim: float
     for _ in range(2):
         u, _, vt = np.linalg.svd(rj[keep].T @ ri[keep])
         rot = u @ np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))]) @ vt
-        res = np.arccos(np.clip(np.einsum("nk,nk->n", rj, ri @ rot.T), -1.0, 1.0))
+        rr = ri @ rot.T  # the angle from atan2(|cross|, dot): arccos of a dot product near 1 has
+        # a floor of ~1.5e-8 rad, above the 1e-9 floor below, so exact matches read 0 or 1.5e-8
+        res = np.arctan2(np.linalg.norm(np.cross(rj, rr), axis=1), np.einsum("nk,nk->n", rj, rr))
         med = float(np.median(res[keep]))
         keep = res <= max(trim * med, 1e-9)
     return rot, med, int(keep.sum())
