@@ -25,38 +25,42 @@ import time
 
 import numpy as np
 
+from fusiongs.atomic import write_text
+from fusiongs.errors import FusionGSError, InputError
 from fusiongs.eval.calibrate import estimate_thresholds
-from fusiongs.eval.edi import edi_ratio, event_count_samples
-from fusiongs.eval.holdout import event_counts_at, frame_subset, kept_neighbours, nearest_kept
+from fusiongs.eval.edi import EDI_SAMPLES, edi_ratio, event_count_samples
+from fusiongs.eval.holdout import carried_counts, frame_subset, kept_neighbours, nearest_kept
 from fusiongs.eval.metrics import psnr
 from fusiongs.frames.response import linear_to_response
 from fusiongs.io.scene_io import load_scene
-from fusiongs.losses.blur import exposure_instants
-from fusiongs.train.pipeline import split_holdout
+from fusiongs.train.pipeline import resolve_config, split_holdout
 
 GRID = (0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.75)
 
 
-def held_out_scores(scene, held, kept, thetas, n_edi: int = 32, n_carry: int = 9) -> np.ndarray:
+def held_out_scores(scene, held, kept, thetas, n_edi: int = EDI_SAMPLES, n_carry: int | None = None
+                    ) -> np.ndarray:
     """Mean held-out PSNR of EDI carried from the kept neighbours, one value per threshold pair.
 
     Args:
         scene: a scene with frames and events.
         held, kept: frame indices (:func:`fusiongs.train.pipeline.split_holdout`).
         thetas: ``[T]`` ``(theta_+, theta_-)`` pairs (log units) or threshold objects.
-        n_edi: instants of each neighbour's EDI (``fusiongs deblur`` uses 32).
-        n_carry: instants of the held-out exposure (the config's ``blur.n_samples``, 9).
+        n_edi: instants of each neighbour's EDI (``fusiongs deblur`` uses the default).
+        n_carry: instants of the held-out exposure; None: the default config's ``blur.n_samples``,
+            as ``fusiongs deblur --holdout`` with the default config.
 
     Returns:
         ``[T, H]`` PSNR (dB, 8-bit values in the frames' own encoding) per threshold and held frame.
     """
     fs, ev = scene.frames, scene.events
+    n_carry = resolve_config(None, ()).blur.n_samples if n_carry is None else n_carry
     lin, mids = fs.to_linear(), fs.mid_times()
     sides = {int(i): [j for j in kept_neighbours(kept, int(i)) if j is not None] for i in held}
     own = {j: event_count_samples(ev, float(fs.t_start[j]), float(fs.t_end[j]), n_edi)
            for j in sorted({j for s in sides.values() for j in s})}
-    carry = {(i, j): event_counts_at(ev, float(mids[j]), exposure_instants(
-        float(fs.t_start[i]), float(fs.t_end[i]), n_carry).numpy()) for i, s in sides.items() for j in s}
+    carry = {(i, j): carried_counts(ev, float(mids[j]), float(fs.t_start[i]), float(fs.t_end[i]), n_carry)
+             for i, s in sides.items() for j in s}
     out = np.zeros((len(thetas), len(held)))
     for a, th in enumerate(thetas):
         sharp = {j: lin[j] / edi_ratio(c, th, ev.cfa) for j, c in own.items()}
@@ -66,19 +70,38 @@ def held_out_scores(scene, held, kept, thetas, n_edi: int = 32, n_carry: int = 9
     return out
 
 
+def thresholds_list(text: str) -> list[float]:
+    """``--grid``: comma-separated positive thresholds (log units)."""
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        vals = []
+    if not vals or not all(np.isfinite(v) and v > 0 for v in vals):
+        raise argparse.ArgumentTypeError(f"expected comma-separated positive thresholds, got {text!r}")
+    return vals
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scene")
     ap.add_argument("--holdout", type=int, default=5, help="K of fusiongs deblur --holdout")
-    ap.add_argument("--grid", default=",".join(map(str, GRID)), help="thresholds tried for ON and OFF")
+    ap.add_argument("--grid", type=thresholds_list, default=list(GRID),
+                    help="thresholds tried for ON and OFF (comma-separated)")
     ap.add_argument("--json", help="write every cell here")
     args = ap.parse_args(argv)
-    scene = load_scene(args.scene)
-    held, kept = split_holdout(scene, args.holdout)
-    t0 = time.perf_counter()
-    est = estimate_thresholds(frame_subset(scene.frames, kept), scene.events)
+    if args.holdout < 2:
+        ap.error(f"--holdout: expected an integer >= 2 (every K-th frame is left out), got {args.holdout}")
+    try:
+        scene = load_scene(args.scene)
+        if scene.events is None or len(scene.events) == 0:
+            raise InputError(args.scene, "events", "a scene with an event stream", "none")
+        held, kept = split_holdout(scene, args.holdout)
+        t0 = time.perf_counter()
+        est = estimate_thresholds(frame_subset(scene.frames, kept), scene.events)
+    except FusionGSError as e:
+        ap.error(str(e))
     t_est = time.perf_counter() - t0
-    grid = [float(v) for v in args.grid.split(",")]
+    grid = args.grid
     pairs = [(p, n) for p in grid for n in grid]
     t0 = time.perf_counter()
     scores = held_out_scores(scene, held, kept, [est, *pairs])
@@ -110,8 +133,7 @@ def main(argv: list[str] | None = None) -> int:
                "best": {"theta_pos": pairs[best - 1][0], "theta_neg": pairs[best - 1][1],
                         "mean": float(means[best])},
                "nearest": float(near)}
-        with open(args.json, "w") as f:
-            json.dump(doc, f, indent=1)
+        write_text(args.json, json.dumps(doc, indent=1))
     return 0
 
 

@@ -28,6 +28,7 @@ from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds, calibration_event_weights
 
 THETA_GRID = tuple(np.round(np.geomspace(0.02, 0.8, 33), 4))
+EDI_SAMPLES = 32  # default instants per exposure of edi_deblur and edi_scene
 
 
 def _thetas(theta) -> tuple[float, float]:
@@ -166,7 +167,7 @@ def estimate_theta(frame_linear: np.ndarray, events: EventStream, t_start: float
 
 
 def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_end: float,
-               theta=0.2, n_samples: int = 32, weights: np.ndarray | None = None) -> np.ndarray:
+               theta=0.2, n_samples: int = EDI_SAMPLES, weights: np.ndarray | None = None) -> np.ndarray:
     """Sharp mid-exposure image of one blurry frame (EDI, Pan et al., CVPR 2019).
 
     Args:
@@ -189,7 +190,7 @@ def edi_deblur(frame_linear: np.ndarray, events: EventStream, t_start: float, t_
     return (b / edi_ratio(counts, theta, events.cfa)).astype(np.float32)
 
 
-def edi_scene(scene, theta=None, n_samples: int = 32, reset_weights: bool = True) -> np.ndarray:
+def edi_scene(scene, theta=None, n_samples: int = EDI_SAMPLES, reset_weights: bool = True) -> np.ndarray:
     """EDI-deblur every frame of a :class:`~fusiongs.io.scene.Scene`.
 
     Args:

@@ -159,21 +159,32 @@ def carry_linear(image_linear: np.ndarray, counts: np.ndarray, theta, cfa: str |
     return np.stack([img * edi_ratio(c[k:k + 1], theta, cfa) for k in range(c.shape[0])])
 
 
+def carried_counts(events: EventStream, t_ref: float, t_start: float, t_end: float, n: int) -> np.ndarray:
+    """Event counts from ``t_ref`` to the N instants of the exposure ``[t_start, t_end]`` (s).
+
+    The instants are :func:`fusiongs.losses.blur.exposure_instants` (midpoint rule), those of the
+    training blur model. The counts do not depend on the thresholds: a caller trying several keeps
+    them (``benchmarks/bench_holdout_edi_grid.py``).
+
+    Returns:
+        ``[N, 2, H, W]`` int32 from :func:`event_counts_at`.
+    """
+    from fusiongs.losses.blur import exposure_instants
+
+    return event_counts_at(events, t_ref, exposure_instants(float(t_start), float(t_end), n).numpy())
+
+
 def carried_exposure(image_linear: np.ndarray, events: EventStream, t_ref: float, t_start: float,
                      t_end: float, n: int, theta) -> np.ndarray:
     """Mean linear image over the exposure ``[t_start, t_end]`` (s) carried from ``t_ref``.
 
-    The N instants are :func:`fusiongs.losses.blur.exposure_instants` (midpoint rule), those of the
-    training blur model. ``mean_k L(t_k) = L(t_ref) mean_k exp(theta dN(t_k))`` (a CFA ratio map is
-    demosaiced after the mean: the two commute).
+    ``mean_k L(t_k) = L(t_ref) mean_k exp(theta dN(t_k))`` over the instants of
+    :func:`carried_counts` (a CFA ratio map is demosaiced after the mean: the two commute).
 
     Returns:
         ``[H, W, C]`` float64 linear prediction of the blurry frame (before the camera response).
     """
-    from fusiongs.losses.blur import exposure_instants
-
-    times = exposure_instants(float(t_start), float(t_end), n).numpy()
-    counts = event_counts_at(events, t_ref, times)
+    counts = carried_counts(events, t_ref, t_start, t_end, n)
     return np.asarray(image_linear, np.float64) * edi_ratio(counts, theta, events.cfa)
 
 

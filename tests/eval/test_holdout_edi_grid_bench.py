@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -63,3 +64,29 @@ def test_main_prints_the_table_and_writes_every_cell(scene, tmp_path, capsys):
     assert len(doc["grid"]) == 16 and doc["held"] == [2, 5]
     best = max(doc["grid"], key=lambda c: np.mean(c["psnr"]))
     assert (best["theta_pos"], best["theta_neg"]) == (doc["best"]["theta_pos"], doc["best"]["theta_neg"])
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--grid", "0.2,x"], ("--grid", "positive thresholds")),
+    (["--grid", "0.2,-0.1"], ("--grid", "positive thresholds")),
+    (["--holdout", "1"], ("--holdout", ">= 2")),
+])
+def test_bad_options_are_refused_in_one_line(scene, tmp_path, capsys, argv, words):
+    path = save_scene(scene, tmp_path / "scene")
+    with pytest.raises(SystemExit) as exc:
+        main([str(path), *argv])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert all(w in err for w in words)
+
+
+def test_a_missing_scene_or_one_without_events_is_refused_in_one_line(scene, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path / "nowhere")])
+    assert exc.value.code == 2 and "nowhere" in capsys.readouterr().err.strip().splitlines()[-1]
+    frames_only = replace(scene, events=None)
+    path = save_scene(frames_only, tmp_path / "frames_only")
+    with pytest.raises(SystemExit) as exc:
+        main([str(path)])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert exc.value.code == 2 and "events" in err and "frames_only" in err
