@@ -17,6 +17,7 @@ import torch
 import torch.nn.functional as F
 
 from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.reproject import pixel_rays
 from fusiongs.errors import InputError
 
 WHERE = "stereo init"
@@ -32,11 +33,8 @@ def inverse_depth_planes(near: float, far: float, n: int) -> torch.Tensor:
 
 
 def _pixel_rays(camera: PinholeCamera) -> torch.Tensor:
-    """``[H, W, 3]`` float64 rays ``K⁻¹ [u, v, 1]`` through the pixel centres."""
-    v, u = torch.meshgrid(torch.arange(camera.height, dtype=torch.float64) + 0.5,
-                          torch.arange(camera.width, dtype=torch.float64) + 0.5, indexing="ij")
-    return torch.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy,
-                        torch.ones_like(u)], -1)
+    """``[H, W, 3]`` float64 rays ``K⁻¹ [u, v, 1]`` through the pixel centres (on the host)."""
+    return pixel_rays(camera, "cpu")
 
 
 def _check(images: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera, name: str) -> None:

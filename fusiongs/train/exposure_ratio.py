@@ -13,7 +13,9 @@ with an Event Camera", CVPR 2019: ``L(t) = B / mean_s exp(c · E(t → s))``) wi
 ``R(t_k) / R(t)`` taken from the fitted scene (frames and events together) instead of from the
 events alone. Where the model already explains the frame, ``ρ = 1`` and nothing changes; where it
 misses detail, the frame supplies it; the assumption fails where the missing detail moves a lot
-within the exposure (heavy blur), and there it brings back that detail blurred.
+within the exposure (heavy blur), and there it brings back that detail blurred. With
+``output.ratio_iterations`` >= 1 (the default) ``ρ`` is attached to the scene's surfaces instead and
+carried by the fitted motion, which deblurs that detail too (:mod:`fusiongs.train.motion_ratio`).
 
 ``ε`` (linear units) keeps dark pixels, where read noise dominates, from amplifying noise; its
 default was chosen on tuning seeds (benchmarks/RESULTS.md, session 10). Pixels that are saturated
@@ -28,10 +30,12 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from fusiongs.camera.reproject import reference_grid
 from fusiongs.frames.response import response_to_linear
 from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.losses.event import to_grey
+from fusiongs.train.motion_ratio import carry, motion_ratio
 from fusiongs.train.state import FusionState
 
 SATURATED = 1.0 - 0.5 / 255.0  # encoded frame values at or above this are clipped (8-bit full scale)
@@ -68,12 +72,14 @@ def containing_frame(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) 
 @torch.no_grad()
 def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.Tensor, n_samples: int,
                       eps: float, grey_weights: tuple[float, float, float], backend: str = "auto",
-                      colour: tuple[np.ndarray, np.ndarray] | None = None
+                      colour: tuple[np.ndarray, np.ndarray] | None = None, iterations: int = 0
                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sharp linear renders at ``times``, as rendered and exposure-ratio corrected.
 
-    An instant inside a frame's exposure is corrected with that frame's ratio (the ratio is assumed
-    constant over the exposure); other instants are left as rendered.
+    An instant inside a frame's exposure is corrected with that frame's ratio; other instants are
+    left as rendered. With ``iterations`` 0 the ratio stays at each pixel over the exposure; with
+    ``iterations >= 1`` it is attached to the scene's surfaces and carried by the fitted motion
+    (:mod:`fusiongs.train.motion_ratio`, that many Richardson–Lucy iterations).
 
     Args:
         state: the fitted scene, camera path.
@@ -86,6 +92,7 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         colour: ``(gain [3], offset [3])`` applied to every render (linear) before the ratio is
             taken (the one-frame colour anchor, :mod:`fusiongs.eval.colour_anchor`); the corrected
             renders then carry it, the rendered ones do not.
+        iterations: 0, or the iterations of the motion-carried ratio (``output.ratio_iterations``).
 
     Returns:
         ``(rendered, corrected, frame)``: ``[T, H, W, 3]`` float32 linear radiance (not clipped),
@@ -120,9 +127,20 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         observed = torch.as_tensor(linear).to(device)
         if observed.shape[-1] == 1:
             predicted = to_grey(predicted, grey_weights)
-        ratio = exposure_ratio(observed, predicted, image >= SATURATED, eps)
+        saturated = image >= SATURATED
+        if iterations:
+            depth, alpha = state.render_depth(scene.camera, t, backend)
+            t_mid = torch.tensor([0.5 * (fs.t_start[i] + fs.t_end[i])], dtype=torch.float64)
+            grid = reference_grid(depth, alpha > 0.5, state.trajectory.c2w(t), state.trajectory.w2c(t_mid)[0],
+                                  scene.camera)
+            rho = motion_ratio(observed, lin[:n_samples], grid[:n_samples], torch.exp(log_gain[i]), saturated,
+                               eps, iterations, grey_weights)
+            seen = carry(rho, grid[n_samples:])
+            fixed = lin[n_samples:] * seen.expand(*seen.shape[:3], 3)
+        else:
+            fixed = lin[n_samples:] * exposure_ratio(observed, predicted, saturated, eps)
         rendered[at] = raw[n_samples:].cpu().numpy()
-        corrected[at] = (lin[n_samples:] * ratio).cpu().numpy()
+        corrected[at] = fixed.cpu().numpy()
     return rendered, corrected, frame
 
 

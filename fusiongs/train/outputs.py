@@ -179,7 +179,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
         gains = frame_log_gains(state, len(scene.frames), kept)
         plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
                                                 cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend,
-                                                colour)
+                                                colour, cfg.output.ratio_iterations)
         srgb, fixed = exposed_srgb(plain), exposed_srgb(fixed)
         corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}
     elif adjust is None and auto_exposure(cfg, len(scene.frames)):  # no level fixed: expose

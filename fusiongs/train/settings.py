@@ -225,6 +225,8 @@ class OutputSettings:
     checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
     exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (train/exposure_ratio.py)
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
+    ratio_iterations: int = 3        # 0: the ratio stays at its pixel over the exposure; N: it moves
+                                     # with the surfaces, N Richardson-Lucy steps (train/motion_ratio.py)
     truth_every: int = 100           # PSNR against gt/ every N iterations (history.jsonl); 0 = off
     exposure: Literal["auto", "none"] = "auto"  # scenes without frames: one linear gain puts the
                                      # renders' 99.5th percentile at 0.9 (their level is arbitrary);
@@ -234,6 +236,9 @@ class OutputSettings:
         if not self.ratio_eps > 0:
             raise ConfigError("config", "output.ratio_eps", "a number > 0 (linear units)",
                               repr(self.ratio_eps))
+        if self.ratio_iterations < 0:
+            raise ConfigError("config", "output.ratio_iterations", "an integer >= 0 (0: per pixel)",
+                              repr(self.ratio_iterations))
         if self.truth_every < 0:
             raise ConfigError("config", "output.truth_every", "an integer >= 0 (0 = off)",
                               repr(self.truth_every))

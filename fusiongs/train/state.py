@@ -64,6 +64,26 @@ class FusionState(nn.Module):
                                          check_values=check_values)
         return colors, alphas, meta
 
+    @torch.no_grad()
+    def render_depth(self, camera: PinholeCamera, t: torch.Tensor, backend: str = "auto"
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Expected surface depth at instants ``t`` ``[T]``: ``(depth [T, H, W], alpha [T, H, W])``.
+
+        Each Gaussian is rendered with its centre's camera depth as a one-channel colour; the
+        composite divided by the accumulated opacity is the depth along the optical axis (scene
+        units) where ``alpha`` is near 1, undefined where nothing was rendered.
+        """
+        m = self.model
+        device = m.means.device
+        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
+        K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
+        z = (m.means @ viewmats[:, :3, :3].transpose(1, 2) + viewmats[:, None, :3, 3])[..., 2:]  # [T, N, 1]
+        comp, alphas, _ = rasterize(m.means, m.rotations, m.scales, m.opacities, z, viewmats,
+                                    K.expand(viewmats.shape[0], 3, 3), camera.width, camera.height,
+                                    backend=backend)
+        alpha = alphas[..., 0]
+        return comp[..., 0] / alpha.clamp_min(1e-6), alpha
+
 
 def scene_extent(c2w: np.ndarray, depth_max: float) -> float:
     """Scene scale for learning rates and densification: camera path radius plus the far depth."""
