@@ -173,3 +173,13 @@ def test_render_depth_of_a_plane_of_gaussians():
     covered = alpha > 0.5
     assert covered.float().mean() > 0.9
     np.testing.assert_allclose(depth[covered].numpy(), 3.0, rtol=1e-3)
+
+
+def test_a_negative_iteration_count_is_refused_by_name():
+    from fusiongs.errors import ConfigError
+    from fusiongs.train.pipeline import resolve_config
+
+    assert resolve_config(None, []).output.ratio_iterations == 3
+    assert resolve_config(None, ["output.ratio_iterations=0"]).output.ratio_iterations == 0
+    with pytest.raises(ConfigError, match="output.ratio_iterations"):
+        resolve_config(None, ["output.ratio_iterations=-1"])
