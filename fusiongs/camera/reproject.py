@@ -14,21 +14,29 @@ import torch
 from fusiongs.camera.pinhole import PinholeCamera
 
 
-def pixel_rays(camera: PinholeCamera, device: torch.device | str | None = None) -> torch.Tensor:
-    """``[H, W, 3]`` float64 rays ``K⁻¹ [u, v, 1]`` through the pixel centres, on ``device``."""
+def _pixel_centres(camera: PinholeCamera, device) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(u, v)`` ``[H, W]`` float64 pixel-centre coordinates (px)."""
     v, u = torch.meshgrid(torch.arange(camera.height, dtype=torch.float64, device=device) + 0.5,
                           torch.arange(camera.width, dtype=torch.float64, device=device) + 0.5,
                           indexing="ij")
+    return u, v
+
+
+def pixel_rays(camera: PinholeCamera, device: torch.device | str | None = None) -> torch.Tensor:
+    """``[H, W, 3]`` float64 rays ``K⁻¹ [u, v, 1]`` through the pixel centres, on ``device``."""
+    u, v = _pixel_centres(camera, device)
     return torch.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy,
                         torch.ones_like(u)], -1)
 
 
+def _as_grid(u: torch.Tensor, v: torch.Tensor, camera: PinholeCamera) -> torch.Tensor:
+    """Pixel coordinates ``[..., ]`` to ``grid_sample``'s ``[..., 2]`` (``align_corners=False``)."""
+    return torch.stack([2 * u / camera.width - 1, 2 * v / camera.height - 1], -1)
+
+
 def identity_grid(camera: PinholeCamera, device: torch.device | str | None = None) -> torch.Tensor:
     """``[H, W, 2]`` float64 grid that reads every pixel at its own centre."""
-    rays = pixel_rays(camera, device)
-    u = rays[..., 0] * camera.fx + camera.cx
-    v = rays[..., 1] * camera.fy + camera.cy
-    return torch.stack([2 * u / camera.width - 1, 2 * v / camera.height - 1], -1)
+    return _as_grid(*_pixel_centres(camera, device), camera)
 
 
 def reference_grid(depth: torch.Tensor, valid: torch.Tensor, c2w: torch.Tensor, w2c_ref: torch.Tensor,
@@ -61,6 +69,6 @@ def reference_grid(depth: torch.Tensor, valid: torch.Tensor, c2w: torch.Tensor, 
     safe = torch.where(z > min_depth, z, torch.ones_like(z))
     u = camera.fx * q[..., 0] / safe + camera.cx
     v = camera.fy * q[..., 1] / safe + camera.cy
-    grid = torch.stack([2 * u / camera.width - 1, 2 * v / camera.height - 1], -1)
+    grid = _as_grid(u, v, camera)
     keep = valid & (z > min_depth) & torch.isfinite(grid).all(-1)
     return torch.where(keep[..., None], grid, identity_grid(camera, dev).expand_as(grid))

@@ -120,13 +120,10 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         if colour is not None:  # as the anchor was fitted and is applied: on renders clipped to [0, 1]
             gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(device) for v in colour)
             lin = raw.clamp(0, 1) * gain + offset
-        predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
         encoded = np.asarray(fs.images[i], np.float32)
         image = torch.as_tensor(encoded).to(device)
         linear = np.asarray(response_to_linear(encoded, fs.response), np.float32)
         observed = torch.as_tensor(linear).to(device)
-        if observed.shape[-1] == 1:
-            predicted = to_grey(predicted, grey_weights)
         saturated = image >= SATURATED
         if iterations:
             depth, alpha = state.render_depth(scene.camera, t, backend)
@@ -138,6 +135,9 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
             seen = carry(rho, grid[n_samples:])
             fixed = lin[n_samples:] * seen.expand(*seen.shape[:3], 3)
         else:
+            predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
+            if observed.shape[-1] == 1:
+                predicted = to_grey(predicted, grey_weights)
             fixed = lin[n_samples:] * exposure_ratio(observed, predicted, saturated, eps)
         rendered[at] = raw[n_samples:].cpu().numpy()
         corrected[at] = fixed.cpu().numpy()

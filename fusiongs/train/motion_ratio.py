@@ -106,6 +106,11 @@ def motion_ratio(observed: torch.Tensor, renders: torch.Tensor, grid: torch.Tens
     target = observed.clamp_min(0) + eps
     rho = torch.ones_like(observed)
     for _ in range(iterations):
-        ratio = torch.where(saturated, torch.ones_like(target), target / (op(rho).clamp_min(0) + eps))
-        rho = torch.where(reached, rho * adjoint(op, ratio) / norm.clamp_min(1e-30), rho)
+        with torch.enable_grad():  # A ρ and Aᵀ of the ratio from one forward pass (A is linear)
+            at = rho.detach().requires_grad_(True)
+            pred = op(at)
+            ratio = target / (pred.detach().clamp_min(0) + eps)
+            ratio = torch.where(saturated, torch.ones_like(ratio), ratio)
+            (back,) = torch.autograd.grad((pred * ratio).sum(), at)
+        rho = torch.where(reached, rho * back / norm.clamp_min(1e-30), rho)
     return rho

@@ -43,6 +43,16 @@ class FusionState(nn.Module):
         self.log_gain = nn.Parameter(torch.zeros(n_frames, device=model.means.device),
                                      requires_grad=learn_gain)
 
+    def _views(self, camera: PinholeCamera, t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(viewmats [T, 4, 4], Ks [T, 3, 3])`` at instants ``t`` on the Gaussians' device and dtype."""
+        m = self.model
+        device = m.means.device
+        # the view matrices are made where the trajectory lives and copied without waiting
+        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
+        # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
+        K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
+        return viewmats, K.expand(viewmats.shape[0], 3, 3)
+
     def render(self, camera: PinholeCamera, t: torch.Tensor, backend: str = "auto",
                check_values: bool = True) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
         """Sharp linear renders at instants ``t`` ``[T]`` (s): ``([T, H, W, 3], alphas, meta)``.
@@ -52,12 +62,7 @@ class FusionState(nn.Module):
         rasteriser's value checks (host syncs on a GPU).
         """
         m = self.model
-        device = m.means.device
-        # the view matrices are made where the trajectory lives and copied without waiting
-        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
-        # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
-        K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
-        Ks = K.expand(viewmats.shape[0], 3, 3)
+        viewmats, Ks = self._views(camera, t)
         colors, alphas, meta = rasterize(m.means, m.rotations, m.scales, m.opacities, m.sh_coeffs(),
                                          viewmats, Ks, camera.width, camera.height,
                                          sh_degree=m.active_sh_degree, backend=backend,
@@ -74,13 +79,10 @@ class FusionState(nn.Module):
         units) where ``alpha`` is near 1, undefined where nothing was rendered.
         """
         m = self.model
-        device = m.means.device
-        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
-        K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
+        viewmats, Ks = self._views(camera, t)
         z = (m.means @ viewmats[:, :3, :3].transpose(1, 2) + viewmats[:, None, :3, 3])[..., 2:]  # [T, N, 1]
-        comp, alphas, _ = rasterize(m.means, m.rotations, m.scales, m.opacities, z, viewmats,
-                                    K.expand(viewmats.shape[0], 3, 3), camera.width, camera.height,
-                                    backend=backend)
+        comp, alphas, _ = rasterize(m.means, m.rotations, m.scales, m.opacities, z, viewmats, Ks,
+                                    camera.width, camera.height, backend=backend)
         alpha = alphas[..., 0]
         return comp[..., 0] / alpha.clamp_min(1e-6), alpha
 
