@@ -5,6 +5,11 @@ frame and is scored against the real one (PSNR on 8-bit values in the frames' ow
 
 * ``fusiongs``: N sharp renders inside the exposure, averaged in linear light, times the mean gain
   of the kept frames, through the frames' response (the blur model of training);
+* ``fusiongs_ratio``: the same renders, each times the exposure-ratio factor ``ρ`` of the previous
+  and next kept frames (the detail the deblurred frames add to the renders,
+  :mod:`fusiongs.train.exposure_ratio`) carried along the fitted motion to that instant; the two
+  neighbours' linear predictions are averaged. It scores the deblurred frames' own detail against
+  a frame that did not make it: better than ``fusiongs`` only if that detail is the scene's;
 * ``nearest``: the kept blurry frame whose mid-exposure is nearest, as it is;
 * ``edi_carried``: the previous and next kept frames, EDI-deblurred to their mid-exposures and
   carried with the events to the N instants of the held-out exposure,
@@ -33,7 +38,7 @@ from fusiongs.eval.edi import edi_ratio
 from fusiongs.events.stream import EventStream
 from fusiongs.frames.frameset import FrameSet
 
-METHODS = ("fusiongs", "nearest", "edi_carried")
+METHODS = ("fusiongs", "fusiongs_ratio", "nearest", "edi_carried")
 RULE = "frame i (0-based) is held out when i % K == K - 1, except the last frame; the first is always kept"
 
 
@@ -242,10 +247,10 @@ def format_heldout(doc: Mapping) -> str:
     """The held-out table as text: one line per frame, then the means."""
 
     def cell(v) -> str:
-        return f"{v:>12.2f}" if v is not None else f"{'-':>12}"
+        return f"{v:>15.2f}" if v is not None else f"{'-':>15}"
 
     lines = [f"held-out frames (K = {doc['holdout']}), PSNR against the real blurry frame:",
-             f"{'frame':<12}" + "".join(f"{m:>12}" for m in METHODS)]
+             f"{'frame':<12}" + "".join(f"{m:>15}" for m in METHODS)]
     for name, row in doc["frames"].items():
         lines.append(f"{name:<12}" + "".join(cell(row.get(m)) for m in METHODS))
     lines.append(f"{'mean':<12}" + "".join(cell(doc["mean"][m]["psnr"]) for m in METHODS))

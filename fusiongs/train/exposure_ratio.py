@@ -21,8 +21,10 @@ carried by the fitted motion, which deblurs that detail too (:mod:`fusiongs.trai
 default was chosen on tuning seeds (benchmarks/RESULTS.md, session 10). Pixels that are saturated
 in the frame carry no ratio (the true value may be higher): there ``ρ = 1``.
 
-Only the frames' own instants can be corrected: renders at other instants (``renders/``, the
-held-out prediction of ``--holdout``) stay the scene's renders.
+Only the frames' own instants are corrected: renders at other instants (``renders/``) stay the
+scene's renders. ``--holdout`` scores, beside the renders, their prediction of a held-out frame
+with the kept neighbours' factors carried along the fitted motion (:func:`factor_carried`): a
+check, on recordings without truth, that the detail the factor adds is the scene's.
 """
 
 from __future__ import annotations
@@ -120,28 +122,72 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         if colour is not None:  # as the anchor was fitted and is applied: on renders clipped to [0, 1]
             gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(device) for v in colour)
             lin = raw.clamp(0, 1) * gain + offset
-        encoded = np.asarray(fs.images[i], np.float32)
-        image = torch.as_tensor(encoded).to(device)
-        linear = np.asarray(response_to_linear(encoded, fs.response), np.float32)
-        observed = torch.as_tensor(linear).to(device)
-        saturated = image >= SATURATED
-        if iterations:
-            depth, alpha = state.render_depth(scene.camera, t, backend)
-            t_mid = torch.tensor([0.5 * (fs.t_start[i] + fs.t_end[i])], dtype=torch.float64)
-            grid = reference_grid(depth, alpha > 0.5, state.trajectory.c2w(t), state.trajectory.w2c(t_mid)[0],
-                                  scene.camera)
-            rho = motion_ratio(observed, lin[:n_samples], grid[:n_samples], torch.exp(log_gain[i]), saturated,
-                               eps, iterations, grey_weights)
-            seen = carry(rho, grid[n_samples:])
-            fixed = lin[n_samples:] * seen.expand(*seen.shape[:3], 3)
-        else:
-            predicted = lin[:n_samples].mean(0) * torch.exp(log_gain[i])
-            if observed.shape[-1] == 1:
-                predicted = to_grey(predicted, grey_weights)
-            fixed = lin[n_samples:] * exposure_ratio(observed, predicted, saturated, eps)
+        observed, saturated = _observed(fs, i, device)
+        grid = _grid_to_mid(state, scene, i, t, backend) if iterations else None
+        rho = _factor(observed, saturated, lin[:n_samples], None if grid is None else grid[:n_samples],
+                      torch.exp(log_gain[i]), eps, iterations, grey_weights)
+        fixed = lin[n_samples:] * (rho if grid is None else _rgb(carry(rho, grid[n_samples:])))
         rendered[at] = raw[n_samples:].cpu().numpy()
         corrected[at] = fixed.cpu().numpy()
     return rendered, corrected, frame
+
+
+def _observed(fs, i: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+    """Frame ``i`` linear ``[H, W, C]`` and its clipped pixels (bool, same shape), on ``device``."""
+    encoded = np.asarray(fs.images[i], np.float32)
+    linear = np.asarray(response_to_linear(encoded, fs.response), np.float32)
+    return torch.as_tensor(linear).to(device), torch.as_tensor(encoded).to(device) >= SATURATED
+
+
+def _grid_to_mid(state: FusionState, scene: Scene, i: int, times: torch.Tensor, backend: str) -> torch.Tensor:
+    """``[T, H, W, 2]`` where the views at ``times`` see frame ``i``'s mid-exposure pixels
+    (:func:`~fusiongs.camera.reproject.reference_grid` on the fitted depth)."""
+    fs = scene.frames
+    depth, alpha = state.render_depth(scene.camera, times, backend)
+    t_mid = torch.tensor([0.5 * (fs.t_start[i] + fs.t_end[i])], dtype=torch.float64)
+    return reference_grid(depth, alpha > 0.5, state.trajectory.c2w(times), state.trajectory.w2c(t_mid)[0],
+                          scene.camera)
+
+
+def _rgb(factor: torch.Tensor) -> torch.Tensor:
+    """A factor ``[..., C]`` (C = 1 for a monochrome frame: it scales all three colours) as ``[..., 3]``."""
+    return factor.expand(*factor.shape[:-1], 3)
+
+
+def _factor(observed: torch.Tensor, saturated: torch.Tensor, renders: torch.Tensor, grid: torch.Tensor | None,
+            gain: torch.Tensor, eps: float, iterations: int, grey_weights: tuple[float, float, float]
+            ) -> torch.Tensor:
+    """``[H, W, C]`` ρ of one frame: carried by the motion ``grid`` (``iterations`` >= 1,
+    :func:`~fusiongs.train.motion_ratio.motion_ratio`) or per pixel (``grid`` None)."""
+    if grid is not None:
+        return motion_ratio(observed, renders, grid, gain, saturated, eps, iterations, grey_weights)
+    predicted = renders.mean(0) * gain
+    if observed.shape[-1] == 1:
+        predicted = to_grey(predicted, grey_weights)
+    return exposure_ratio(observed, predicted, saturated, eps)
+
+
+@torch.no_grad()
+def frame_factor(state: FusionState, scene: Scene, i: int, log_gain: torch.Tensor, n_samples: int, eps: float,
+                 grey_weights: tuple[float, float, float], backend: str = "auto", iterations: int = 0
+                 ) -> torch.Tensor:
+    """``[H, W, C]`` the factor ``ρ`` of frame ``i`` on its mid-exposure pixel grid, as
+    :func:`corrected_renders` computes it (``log_gain``: ``[F]``, :func:`frame_log_gains`)."""
+    fs = scene.frames
+    t = exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples)
+    lin, _, _ = state.render(scene.camera, t, backend)
+    observed, saturated = _observed(fs, i, lin.device)
+    grid = _grid_to_mid(state, scene, i, t, backend) if iterations else None
+    return _factor(observed, saturated, lin, grid, torch.exp(log_gain[i]), eps, iterations, grey_weights)
+
+
+@torch.no_grad()
+def factor_carried(state: FusionState, scene: Scene, factor: torch.Tensor, i: int, times: torch.Tensor,
+                   backend: str = "auto") -> torch.Tensor:
+    """``[T, H, W, 3]`` frame ``i``'s factor (:func:`frame_factor`) where the views at ``times`` see the
+    surfaces it is attached to: the detail of a frame carried along the fitted motion to other
+    instants (the held-out prediction of ``--holdout``, :func:`fusiongs.train.pipeline.score_holdout`)."""
+    return _rgb(carry(factor, _grid_to_mid(state, scene, i, times, backend)))
 
 
 def frame_log_gains(state: FusionState, n_frames: int, kept: np.ndarray | None = None) -> torch.Tensor:

@@ -144,7 +144,7 @@ def split_holdout(scene: Scene, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray, k: int
                   ) -> tuple[dict, dict[str, dict[str, np.ndarray]]]:
-    """Predict each held-out blurry frame three ways and score it against the real one (METHOD §6a).
+    """Predict each held-out blurry frame four ways and score it against the real one (METHOD §6a).
 
     Args:
         tr: the run, trained on the frames ``kept`` of ``scene``.
@@ -153,10 +153,11 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
         k: the ``--holdout`` period (recorded).
 
     Returns:
-        ``(document, pictures)``: the ``heldout.json`` document (per frame the PSNR of
-        ``fusiongs``, ``nearest`` and ``edi_carried`` on 8-bit values in the frames' own encoding,
-        plus the means), and per frame ``{column: sRGB image}`` for the report. fusiongs uses the
-        mean gain ``g`` of the kept frames (1 when gains are not learned); EDI-carried uses the
+        ``(document, pictures)``: the ``heldout.json`` document (per frame the PSNR of each of
+        :data:`~fusiongs.eval.holdout.METHODS` on 8-bit values in the frames' own encoding, plus
+        the means), and per frame ``{column: sRGB image}`` for the report. fusiongs uses the mean
+        gain ``g`` of the kept frames (1 when gains are not learned), and ``fusiongs_ratio`` the
+        kept neighbours' factors as ``output.ratio_iterations`` computes them; EDI-carried uses the
         run's starting thresholds (``calibration.json``) and is ``None`` without events.
     """
     import torch
@@ -173,7 +174,7 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
     from fusiongs.eval.metrics import psnr
     from fusiongs.frames.response import linear_to_response, response_to_linear
     from fusiongs.losses.blur import exposure_instants
-    from fusiongs.train.exposure_ratio import frame_log_gains
+    from fusiongs.train.exposure_ratio import factor_carried, frame_factor, frame_log_gains
     from fusiongs.train.step import predict_blurry
 
     fs, cfg, state = scene.frames, tr.config, tr.state
@@ -184,8 +185,17 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
         from fusiongs.eval.calibrate import estimate_thresholds
 
         theta = estimate_thresholds(frame_subset(fs, kept), events)
-    log_g = frame_log_gains(state, len(fs), kept)[int(held[0])]  # held-out frames: the mean gain
+    log_gains = frame_log_gains(state, len(fs), kept)
+    log_g = log_gains[int(held[0])]  # held-out frames: the mean gain
     gain = float(log_g.exp())
+    out_cfg = cfg.output
+    factors: dict[int, torch.Tensor] = {}
+
+    def factor(j: int) -> torch.Tensor:
+        if j not in factors:
+            factors[j] = frame_factor(state, scene, j, log_gains, n, out_cfg.ratio_eps,
+                                      cfg.events.grey_weights, cfg.backend, out_cfg.ratio_iterations)
+        return factors[j]
 
     def display(encoded: np.ndarray) -> np.ndarray:
         out = linear_to_srgb(np.clip(response_to_linear(np.asarray(encoded, np.float64), fs.response), 0, 1))
@@ -195,12 +205,18 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
     frames, pictures = {}, {}
     for i in (int(v) for v in held):
         s, e, name = float(fs.t_start[i]), float(fs.t_end[i]), fs.names[i]
-        with torch.no_grad():
-            renders, _, _ = state.render(scene.camera, exposure_instants(s, e, n), cfg.backend)
-            ours = predict_blurry(renders, log_g, fs.response, fs.images.shape[-1], cfg.events.grey_weights)
-        near = nearest_kept(mids, kept, i)
-        preds = {"fusiongs": ours.cpu().numpy(), "nearest": fs.images[near], "edi_carried": None}
         sides = [j for j in kept_neighbours(kept, i) if j is not None]
+        times = exposure_instants(s, e, n)
+        channels, grey = fs.images.shape[-1], cfg.events.grey_weights
+        with torch.no_grad():
+            renders, _, _ = state.render(scene.camera, times, cfg.backend)
+            ours = predict_blurry(renders, log_g, fs.response, channels, grey)
+            detail = torch.stack([renders * factor_carried(state, scene, factor(j), j, times, cfg.backend)
+                                  for j in sides]).mean(0)
+            ours_ratio = predict_blurry(detail, log_g, fs.response, channels, grey)
+        near = nearest_kept(mids, kept, i)
+        preds = {"fusiongs": ours.cpu().numpy(), "fusiongs_ratio": ours_ratio.cpu().numpy(),
+                 "nearest": fs.images[near], "edi_carried": None}
         if events is not None:
             carried = []
             for j in sides:

@@ -17,7 +17,7 @@ from fusiongs.frames.response import linear_to_response
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.losses.threshold import ContrastThreshold
 from fusiongs.scene.gaussians import GaussianModel
-from fusiongs.train.exposure_ratio import corrected_renders, exposure_ratio
+from fusiongs.train.exposure_ratio import corrected_renders, exposure_ratio, factor_carried, frame_factor
 from fusiongs.train.motion_ratio import adjoint, blur_operator, carry, motion_ratio
 from fusiongs.train.state import FusionState
 
@@ -160,6 +160,41 @@ def test_corrected_renders_deblur_moving_detail_with_the_fitted_motion():
         errs[it] = float(np.abs(fixed[0] - sharp)[inner].mean())
     render_err = float(np.abs(plain[0] - sharp)[inner].mean())
     assert errs[3] < 0.6 * errs[0] < render_err, (errs, render_err)
+
+
+@pytest.mark.parametrize("iterations", [0, 3])
+def test_a_kept_frames_factor_carried_along_the_motion_predicts_a_held_out_frame(iterations):
+    """--holdout's ``fusiongs_ratio``: the detail of the kept frames 0 and 2, carried to frame 1's
+    exposure, predicts frame 1 (which the factors never saw) better than the render alone."""
+    state = SlidingPlane()
+    spans = [(0.0, 0.05), (0.1, 0.15), (0.2, 0.25)]  # 3 px of motion in each exposure, 6 px between
+
+    def blurry(s, e, detail):
+        return torch.stack([state.image(float(t), detail) for t in exposure_instants(s, e, 25)]).mean(0)
+
+    frames = np.stack([linear_to_response(blurry(s, e, True).numpy().astype(np.float64), "srgb")
+                       for s, e in spans]).astype(np.float32)
+    starts, ends = (np.array(v) for v in zip(*spans))
+    scene = SimpleNamespace(frames=FrameSet(images=frames, t_start=starts, t_end=ends, names=("0", "1", "2"),
+                                            response="srgb"), camera=CAM)
+    gains = torch.zeros(3)
+    times = exposure_instants(*spans[1], N)
+    renders = state.render(CAM, times)[0]
+    carried = [renders * factor_carried(state, scene, frame_factor(state, scene, j, gains, N, 1e-4, GREY,
+                                                                   iterations=iterations), j, times)
+               for j in (0, 2)]
+    assert carried[0].shape == renders.shape == (N, H, W, 3)
+    truth = blurry(*spans[1], True)
+    inner = (slice(None), slice(8, W - 8))
+
+    def err(pred):
+        return float((pred.mean(0) - truth).abs()[inner].mean())
+
+    with_detail, render_only = err(torch.stack(carried).mean(0)), err(renders)
+    assert with_detail < 0.5 * render_only, (with_detail, render_only)
+    # a factor of 1 carries nothing: the prediction is the render's
+    ones = factor_carried(state, scene, torch.ones(H, W, 1), 0, times)
+    torch.testing.assert_close(ones, torch.ones_like(renders))
 
 
 def test_render_depth_of_a_plane_of_gaussians():

@@ -160,7 +160,7 @@ def test_holdout_without_truth_scores_held_out_frames_and_writes_report(three_fr
     assert doc["holdout"] == 2 and list(doc["frames"]) == ["000001"]  # frame 1 of 0..2: i % 2 == 1
     row = doc["frames"]["000001"]
     assert row["nearest_frame"] == "000000" and row["neighbours"] == ["000000", "000002"]
-    for m in ("fusiongs", "nearest", "edi_carried"):
+    for m in ("fusiongs", "fusiongs_ratio", "nearest", "edi_carried"):
         assert np.isfinite(row[m]) and row[m] > 5 and doc["mean"][m] == {"psnr": row[m], "n": 1}
     assert row["edi_carried"] > row["nearest"]  # events carry the neighbours across the motion
     # trained on the two kept frames; outputs still cover every frame
