@@ -9,6 +9,10 @@ per-pixel ratio (session 10). Prints one row per run, the mean, and the gain of 
 
     PYTHONPATH=. python benchmarks/bench_exposure_ratio.py RUN SCENE [RUN SCENE ...] \
         [--iterations 0,1,2,3,5] [--json F]
+
+With ``--novel`` the scene's requested renders outside every exposure (``novel_*``, scored against
+``gt/novel_*.png``) are rescored instead, as rendered (the reference) and with both neighbouring
+frames' factors carried to them (``output.ratio_between``, the run's ``ratio_iterations``).
 """
 
 from __future__ import annotations
@@ -69,6 +73,46 @@ def rescore(run: Path, scene_path: Path, iterations: list[int]) -> dict:
     return out
 
 
+def rescore_novel(run: Path, scene_path: Path) -> dict:
+    """``{"render": mean PSNR, "between": mean PSNR, "n": instants}`` of the requested renders with
+    a truth image that lie outside every exposure, without and with ``output.ratio_between``."""
+    from fusiongs.train.exposure_ratio import containing_frame
+
+    scene = load_scene(scene_path)
+    fs = scene.frames
+    reqs = [r for r in scene.renders if (scene_path / "gt" / f"{r.name}.png").is_file()]
+    times = np.array([r.t for r in reqs], np.float64)
+    outside = [r for r, f in zip(reqs, containing_frame(fs.t_start, fs.t_end, times)) if f < 0]
+    if len(fs) < 2 or not outside:
+        raise InputError(scene_path / "gt", "<render name>.png", "truth images of requested renders "
+                         "outside every exposure, in a scene with two frames or more",
+                         f"{len(outside)} such render(s), {len(fs)} frame(s)")
+    state, _, cfg = restore_state(run / "checkpoint.pt")
+    gt = read_gt(scene_path / "gt", [r.name for r in outside])
+    out: dict = {"n": len(outside)}
+    for key, between in (("render", False), ("between", True)):
+        _, fixed, _ = corrected_renders(state, scene, [r.t for r in outside], frame_log_gains(state, len(fs)),
+                                        int(cfg["blur"]["n_samples"]), float(cfg["output"]["ratio_eps"]),
+                                        tuple(cfg["events"]["grey_weights"]), str(cfg.get("backend", "auto")),
+                                        None, int(cfg["output"].get("ratio_iterations", 3)), between)
+        srgb = exposed_srgb(fixed)
+        out[key] = float(np.mean([psnr(srgb[j], gt[r.name]) for j, r in enumerate(outside)]))
+    return out
+
+
+def format_novel(rows: dict[str, dict]) -> str:
+    """Rows ``run | instants | render | between | gain``, the mean and the smallest gain."""
+    lines = ["run".ljust(28) + f"{'n':>4}{'render':>10}{'between':>10}{'gain':>8}"]
+    for name, r in rows.items():
+        lines.append(name[-28:].ljust(28) + f"{r['n']:4d}{r['render']:10.2f}{r['between']:10.2f}"
+                     f"{r['between'] - r['render']:+8.2f}")
+    gains = [r["between"] - r["render"] for r in rows.values()]
+    lines.append("mean".ljust(32) + f"{np.mean([r['render'] for r in rows.values()]):10.2f}"
+                 f"{np.mean([r['between'] for r in rows.values()]):10.2f}{np.mean(gains):+8.2f}")
+    lines.append("smallest gain".ljust(52) + f"{min(gains):+8.2f}")
+    return "\n".join(lines)
+
+
 def format_table(rows: dict[str, dict], iterations: list[int]) -> str:
     """Rows ``run | PSNR at each count | seconds``, the mean, and each count's gain over 0."""
     head = "run".ljust(28) + "".join(f"{f'{it} it.':>10}" for it in iterations) + f"{'s (max)':>9}"
@@ -89,6 +133,8 @@ def main(argv=None) -> int:
     ap.add_argument("pairs", nargs="+", metavar="RUN SCENE", help="run folder and its scene folder, repeated")
     ap.add_argument("--iterations", default="0,1,2,3,5", help="counts to compare (0, the reference, always)")
     ap.add_argument("--json", default=None, help="write every row to this file")
+    ap.add_argument("--novel", action="store_true",
+                    help="rescore the renders between exposures (output.ratio_between) instead")
     args = ap.parse_args(argv)
     try:
         if len(args.pairs) % 2:
@@ -97,13 +143,15 @@ def main(argv=None) -> int:
         its = parse_iterations(args.iterations)
         rows = {}
         for run, scene in zip(args.pairs[::2], args.pairs[1::2]):
-            rows[run] = rescore(Path(run), Path(scene), its)
+            rows[run] = (rescore_novel(Path(run), Path(scene)) if args.novel
+                         else rescore(Path(run), Path(scene), its))
     except FusionGSError as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
-    print(format_table(rows, its))
+    print(format_novel(rows) if args.novel else format_table(rows, its))
     if args.json:
-        write_text(Path(args.json), json.dumps({"iterations": its, "runs": rows}, indent=1))
+        doc = {"novel": True, "runs": rows} if args.novel else {"iterations": its, "runs": rows}
+        write_text(Path(args.json), json.dumps(doc, indent=1))
     return 0
 
 

@@ -21,10 +21,13 @@ carried by the fitted motion, which deblurs that detail too (:mod:`fusiongs.trai
 default was chosen on tuning seeds (benchmarks/RESULTS.md, session 10). Pixels that are saturated
 in the frame carry no ratio (the true value may be higher): there ``ρ = 1``.
 
-Only the frames' own instants are corrected: renders at other instants (``renders/``) stay the
+Instants between two exposures (``renders/``, novel instants) are corrected too with
+``output.ratio_between`` (the default, with ``ratio_iterations`` >= 1): both frames' factors are
+carried there along the fitted motion (:func:`factor_carried`) and weighted linearly in time
+(benchmarks/RESULTS.md, session 46). Instants before the first or after the last exposure stay the
 scene's renders. ``--holdout`` scores, beside the renders, their prediction of a held-out frame
-with the kept neighbours' factors carried along the fitted motion (:func:`factor_carried`): a
-check, on recordings without truth, that the detail the factor adds is the scene's.
+with the kept neighbours' factors carried the same way: a check, on recordings without truth, that
+the detail the factor adds is the scene's.
 """
 
 from __future__ import annotations
@@ -74,14 +77,18 @@ def containing_frame(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) 
 @torch.no_grad()
 def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.Tensor, n_samples: int,
                       eps: float, grey_weights: tuple[float, float, float], backend: str = "auto",
-                      colour: tuple[np.ndarray, np.ndarray] | None = None, iterations: int = 0
-                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                      colour: tuple[np.ndarray, np.ndarray] | None = None, iterations: int = 0,
+                      between: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Sharp linear renders at ``times``, as rendered and exposure-ratio corrected.
 
-    An instant inside a frame's exposure is corrected with that frame's ratio; other instants are
-    left as rendered. With ``iterations`` 0 the ratio stays at each pixel over the exposure; with
-    ``iterations >= 1`` it is attached to the scene's surfaces and carried by the fitted motion
-    (:mod:`fusiongs.train.motion_ratio`, that many Richardson–Lucy iterations).
+    An instant inside a frame's exposure is corrected with that frame's ratio. With ``iterations``
+    0 the ratio stays at each pixel over the exposure; with ``iterations >= 1`` it is attached to
+    the scene's surfaces and carried by the fitted motion (:mod:`fusiongs.train.motion_ratio`, that
+    many Richardson–Lucy iterations). An instant between two exposures is left as rendered, or
+    with ``between`` (and ``iterations >= 1``) corrected with both frames' factors carried to it
+    along the motion (:func:`factor_carried`), weighted linearly in time from the end of the one
+    exposure (weight 1) to the start of the next (weight 0), so the correction is continuous at
+    both. Instants before the first or after the last exposure stay as rendered.
 
     Args:
         state: the fitted scene, camera path.
@@ -95,41 +102,81 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
             taken (the one-frame colour anchor, :mod:`fusiongs.eval.colour_anchor`); the corrected
             renders then carry it, the rendered ones do not.
         iterations: 0, or the iterations of the motion-carried ratio (``output.ratio_iterations``).
+        between: correct the instants between two exposures too (``output.ratio_between``).
 
     Returns:
-        ``(rendered, corrected, frame)``: ``[T, H, W, 3]`` float32 linear radiance (not clipped),
-        and ``[T]`` the frame whose ratio was applied (-1: none).
+        ``(rendered, corrected, applied)``: ``[T, H, W, 3]`` float32 linear radiance (not clipped),
+        and ``[T]`` bool, a ratio was applied.
     """
     fs = scene.frames
     times = np.asarray(times, np.float64).reshape(-1)
     frame = containing_frame(fs.t_start, fs.t_end, times) if len(fs) else np.full(times.size, -1)
-    device = state.model.means.device
+    sides = between_frames(fs.t_start, fs.t_end, times) if between and iterations and len(fs) else None
     h, w = scene.camera.height, scene.camera.width
     rendered = np.zeros((times.size, h, w, 3), np.float32)
     corrected = np.zeros_like(rendered)
-    for i in np.unique(frame):
-        at = np.flatnonzero(frame == i)
-        if i < 0:
-            for j in range(0, at.size, 8):
-                batch = at[j:j + 8]
-                lin, _, _ = state.render(scene.camera, torch.as_tensor(times[batch]), backend)
-                rendered[batch] = corrected[batch] = lin.cpu().numpy()
-            continue
-        t = torch.cat([exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples),
-                       torch.as_tensor(times[at])])
+    applied = frame >= 0
+    factors: dict[int, torch.Tensor] = {}
+
+    def factor(i: int) -> torch.Tensor:
+        if i not in factors:
+            factors[i] = frame_factor(state, scene, i, log_gain, n_samples, eps, grey_weights, backend,
+                                      iterations, colour)
+        return factors[i]
+
+    order = np.argsort(times, kind="stable")  # in time order, a frame's factor is needed only while near
+    for j in range(0, times.size, 8):
+        batch = order[j:j + 8]
+        t = torch.as_tensor(times[batch])
         raw, _, _ = state.render(scene.camera, t, backend)
-        lin = raw
-        if colour is not None:  # as the anchor was fitted and is applied: on renders clipped to [0, 1]
-            gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(device) for v in colour)
-            lin = raw.clamp(0, 1) * gain + offset
-        observed, saturated = _observed(fs, i, device)
-        grid = _grid_to_mid(state, scene, i, t, backend) if iterations else None
-        rho = _factor(observed, saturated, lin[:n_samples], None if grid is None else grid[:n_samples],
-                      torch.exp(log_gain[i]), eps, iterations, grey_weights)
-        fixed = lin[n_samples:] * (rho if grid is None else _rgb(carry(rho, grid[n_samples:])))
-        rendered[at] = raw[n_samples:].cpu().numpy()
-        corrected[at] = fixed.cpu().numpy()
-    return rendered, corrected, frame
+        lin = _coloured(raw, colour)
+        rendered[batch] = raw.cpu().numpy()
+        corrected[batch] = raw.cpu().numpy()
+        for k, b in enumerate(batch):
+            tk, i = t[k:k + 1], int(frame[b])
+            if i >= 0:  # inside frame i's exposure
+                rho = factor(i)
+                fixed = lin[k] * (factor_carried(state, scene, rho, i, tk, backend)[0] if iterations else rho)
+            elif sides is not None and sides[b, 0] >= 0 and sides[b, 1] >= 0:
+                p, q, wp = int(sides[b, 0]), int(sides[b, 1]), float(sides[b, 2])
+                fixed = lin[k] * (wp * factor_carried(state, scene, factor(p), p, tk, backend)[0]
+                                  + (1.0 - wp) * factor_carried(state, scene, factor(q), q, tk, backend)[0])
+                applied[b] = True
+            else:
+                continue
+            corrected[b] = fixed.cpu().numpy()
+            lowest = i if i >= 0 else p
+            for old in [f for f in factors if f < lowest]:  # frames are in time order: no later
+                del factors[old]                            # instant needs them (bounded memory)
+    return rendered, corrected, applied
+
+
+def between_frames(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``[T, 3]`` for each instant outside every exposure: the frame whose exposure ended last before
+    it, the frame whose exposure starts first after it (-1 where none), and the first one's weight
+    ``(s_q - t) / (s_q - e_p)`` (1 at the end of its exposure, 0 at the start of the next). Rows of
+    instants inside an exposure are ``(-1, -1, 0)``."""
+    s, e = np.asarray(t_start, np.float64), np.asarray(t_end, np.float64)
+    t = np.asarray(times, np.float64).reshape(-1)
+    out = np.zeros((t.size, 3))
+    out[:, :2] = -1
+    inside = containing_frame(s, e, t) >= 0
+    for b in np.flatnonzero(~inside):
+        before, after = np.flatnonzero(e <= t[b]), np.flatnonzero(s >= t[b])
+        p = int(before[np.argmax(e[before])]) if before.size else -1
+        q = int(after[np.argmin(s[after])]) if after.size else -1
+        wp = (s[q] - t[b]) / max(s[q] - e[p], 1e-12) if p >= 0 and q >= 0 else 0.0
+        out[b] = (p, q, wp)
+    return out
+
+
+def _coloured(raw: torch.Tensor, colour: tuple[np.ndarray, np.ndarray] | None) -> torch.Tensor:
+    """Renders with the one-frame colour anchor applied, as it was fitted: on renders clipped to
+    [0, 1] (``raw`` itself without one)."""
+    if colour is None:
+        return raw
+    gain, offset = (torch.as_tensor(np.asarray(v, np.float32)).to(raw.device) for v in colour)
+    return raw.clamp(0, 1) * gain + offset
 
 
 def _observed(fs, i: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
@@ -169,13 +216,14 @@ def _factor(observed: torch.Tensor, saturated: torch.Tensor, renders: torch.Tens
 
 @torch.no_grad()
 def frame_factor(state: FusionState, scene: Scene, i: int, log_gain: torch.Tensor, n_samples: int, eps: float,
-                 grey_weights: tuple[float, float, float], backend: str = "auto", iterations: int = 0
-                 ) -> torch.Tensor:
+                 grey_weights: tuple[float, float, float], backend: str = "auto", iterations: int = 0,
+                 colour: tuple[np.ndarray, np.ndarray] | None = None) -> torch.Tensor:
     """``[H, W, C]`` the factor ``ρ`` of frame ``i`` on its mid-exposure pixel grid, as
-    :func:`corrected_renders` computes it (``log_gain``: ``[F]``, :func:`frame_log_gains`)."""
+    :func:`corrected_renders` computes it (``log_gain``: ``[F]``, :func:`frame_log_gains`;
+    ``colour``: the colour anchor, as there)."""
     fs = scene.frames
     t = exposure_instants(float(fs.t_start[i]), float(fs.t_end[i]), n_samples)
-    lin, _, _ = state.render(scene.camera, t, backend)
+    lin = _coloured(state.render(scene.camera, t, backend)[0], colour)
     observed, saturated = _observed(fs, i, lin.device)
     grid = _grid_to_mid(state, scene, i, t, backend) if iterations else None
     return _factor(observed, saturated, lin, grid, torch.exp(log_gain[i]), eps, iterations, grey_weights)

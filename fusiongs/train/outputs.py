@@ -151,9 +151,10 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     Without frames (and ``output.exposure`` auto) the renders get one linear gain
     (:func:`fusiongs.train.render_io.exposure_gain`, written to ``exposure.json``) before they are
     clipped. The deblurred frames are the renders at the frames' mid-exposure; with
-    ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure are
-    exposure-ratio corrected (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the
-    renders with ``colour`` applied, so ``adjust`` is not applied to them again.
+    ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure (with
+    ``output.ratio_between``, also between two exposures) are exposure-ratio corrected
+    (:mod:`fusiongs.train.exposure_ratio`): the ratio is taken on the renders with ``colour``
+    applied, so ``adjust`` is not applied to them again.
 
     Args:
         adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
@@ -177,11 +178,11 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     (out / EXPOSURE_FILE).unlink(missing_ok=True)  # an earlier event-only run's, in this folder
     if cfg.output.exposure_ratio and len(scene.frames):
         gains = frame_log_gains(state, len(scene.frames), kept)
-        plain, fixed, frame = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
+        plain, fixed, applied = corrected_renders(state, scene, times, gains, cfg.blur.n_samples,
                                                 cfg.output.ratio_eps, cfg.events.grey_weights, cfg.backend,
-                                                colour, cfg.output.ratio_iterations)
+                                                colour, cfg.output.ratio_iterations, cfg.output.ratio_between)
         srgb, fixed = exposed_srgb(plain), exposed_srgb(fixed)
-        corrected = {k: fixed[j] for j, k in enumerate(keys) if frame[j] >= 0}
+        corrected = {k: fixed[j] for j, k in enumerate(keys) if applied[j]}
     elif adjust is None and auto_exposure(cfg, len(scene.frames)):  # no level fixed: expose
         lin = render_linear(state, scene.camera, times, cfg.backend)
         gain = exposure_gain(lin)

@@ -227,6 +227,8 @@ class OutputSettings:
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
     ratio_iterations: int = 3        # 0: the ratio stays at its pixel over the exposure; N: it moves
                                      # with the surfaces, N Richardson-Lucy steps (train/motion_ratio.py)
+    ratio_between: bool = True       # instants between two exposures (renders/, novel views): both
+                                     # frames' factors carried there along the motion (ratio_iterations >= 1)
     truth_every: int = 100           # PSNR against gt/ every N iterations (history.jsonl); 0 = off
     exposure: Literal["auto", "none"] = "auto"  # scenes without frames: one linear gain puts the
                                      # renders' 99.5th percentile at 0.9 (their level is arbitrary);

@@ -44,3 +44,17 @@ def test_bad_input_is_one_line_and_exit_2(tiny_scene, tiny_run, tmp_path, capsys
 
 def test_parse_iterations_always_includes_the_reference():
     assert parse_iterations("3,1,3") == [0, 1, 3]
+
+
+def test_novel_reproduces_the_runs_own_novel_scores(tiny_scene, tiny_run, tmp_path, capsys):
+    """--novel: with the run's default (output.ratio_between on) the renders between the exposures
+    score as the run's metrics.json scored them, and as rendered as its "fusiongs_render"."""
+    out = tmp_path / "novel.json"
+    assert main([str(tiny_run), str(tiny_scene), "--novel", "--json", str(out)]) == 0
+    assert "smallest gain" in capsys.readouterr().out
+    row = json.loads(out.read_text())["runs"][str(tiny_run)]
+    novel = json.loads((tiny_run / "metrics.json").read_text())["mean"]["novel"]
+    assert row["n"] == 1
+    assert row["between"] == pytest.approx(novel["fusiongs"]["psnr"], abs=1e-6)
+    assert row["render"] == pytest.approx(novel["fusiongs_render"]["psnr"], abs=1e-6)
+    assert row["between"] != pytest.approx(row["render"], abs=1e-3)

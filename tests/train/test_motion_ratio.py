@@ -17,7 +17,13 @@ from fusiongs.frames.response import linear_to_response
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.losses.threshold import ContrastThreshold
 from fusiongs.scene.gaussians import GaussianModel
-from fusiongs.train.exposure_ratio import corrected_renders, exposure_ratio, factor_carried, frame_factor
+from fusiongs.train.exposure_ratio import (
+    between_frames,
+    corrected_renders,
+    exposure_ratio,
+    factor_carried,
+    frame_factor,
+)
 from fusiongs.train.motion_ratio import adjoint, blur_operator, carry, motion_ratio
 from fusiongs.train.state import FusionState
 
@@ -155,7 +161,7 @@ def test_corrected_renders_deblur_moving_detail_with_the_fitted_motion():
     for it in (0, 3):
         plain, fixed, which = corrected_renders(state, scene, [mid, 0.5], state.log_gain, N, 1e-4, GREY,
                                                 iterations=it)
-        assert which.tolist() == [0, -1]
+        assert which.tolist() == [True, False]
         np.testing.assert_array_equal(fixed[1], plain[1])  # outside the exposure: the render
         errs[it] = float(np.abs(fixed[0] - sharp)[inner].mean())
     render_err = float(np.abs(plain[0] - sharp)[inner].mean())
@@ -195,6 +201,37 @@ def test_a_kept_frames_factor_carried_along_the_motion_predicts_a_held_out_frame
     # a factor of 1 carries nothing: the prediction is the render's
     ones = factor_carried(state, scene, torch.ones(H, W, 1), 0, times)
     torch.testing.assert_close(ones, torch.ones_like(renders))
+
+
+def test_between_frames_weighs_the_two_exposures_linearly_in_time():
+    times = np.array([0.02, 0.05, 0.07, 0.2, -0.1])
+    rows = between_frames(np.array([0.0, 0.1]), np.array([0.04, 0.14]), times)
+    np.testing.assert_allclose(rows, [[-1, -1, 0], [0, 1, 5 / 6], [0, 1, 0.5], [1, -1, 0], [-1, 0, 0]])
+
+
+def test_instants_between_exposures_get_both_frames_detail_when_asked():
+    """``output.ratio_between``: an instant in the gap between two exposures is corrected with both
+    frames' factors carried to it, which brings the plane's detail that the renders lack."""
+    state = SlidingPlane()
+    spans = [(0.0, 0.04), (0.1, 0.14)]
+    frames = np.stack([linear_to_response(torch.stack([state.image(float(t), True) for t in
+                                                       exposure_instants(s, e, 25)]).mean(0).numpy()
+                                          .astype(np.float64), "srgb") for s, e in spans]).astype(np.float32)
+    starts, ends = (np.array(v) for v in zip(*spans))
+    scene = SimpleNamespace(frames=FrameSet(images=frames, t_start=starts, t_end=ends, names=("0", "1"),
+                                            response="srgb"), camera=CAM)
+    times = [0.07, 0.2]  # in the gap; after the last exposure
+    truth = state.image(0.07, detail=True).numpy()
+    inner = (slice(None), slice(8, W - 8))
+    gains = torch.zeros(2)
+    plain, off, applied_off = corrected_renders(state, scene, times, gains, N, 1e-4, GREY, iterations=3)
+    _, on, applied_on = corrected_renders(state, scene, times, gains, N, 1e-4, GREY, iterations=3,
+                                          between=True)
+    assert applied_off.tolist() == [False, False] and applied_on.tolist() == [True, False]
+    np.testing.assert_array_equal(off, plain)
+    np.testing.assert_array_equal(on[1], plain[1])  # no frame after it: as rendered
+    err_on, err_render = (float(np.abs(v - truth)[inner].mean()) for v in (on[0], plain[0]))
+    assert err_on < 0.5 * err_render, (err_on, err_render)
 
 
 def test_render_depth_of_a_plane_of_gaussians():
