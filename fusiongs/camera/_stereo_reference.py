@@ -18,7 +18,7 @@ def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor
     gamma = 1 / 2.2
     r = ref.clamp_min(0).pow(gamma).float().permute(2, 0, 1)[None]      # [1, C, H, W]
     s = src.clamp_min(0).pow(gamma).float().permute(0, 3, 1, 2)         # [S, C, H, W]
-    rays = pixel_rays(camera, "cpu").reshape(-1, 3)                           # [P, 3]
+    rays = pixel_rays(camera, "cpu").reshape(-1, 3)                     # [P, 3]
     ref_c2w, src_c2w = ref_c2w.double(), src_c2w.double()
     w2s = torch.linalg.inv(src_c2w) @ ref_c2w                           # ref camera -> source camera
     rot, trans = w2s[:, :3, :3], w2s[:, :3, 3]

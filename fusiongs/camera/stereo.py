@@ -96,7 +96,7 @@ def plane_sweep_cost(ref: torch.Tensor, ref_c2w: torch.Tensor, src: torch.Tensor
     # (float64 here, float32 per plane: 1e-6 of a pixel at these sizes)
     w2s = torch.linalg.inv(src_c2w.double().to(dev)) @ ref_c2w.double().to(dev)  # ref cam -> source cam
     scale = torch.tensor([2 * camera.fx / w, 2 * camera.fy / h, 1.0], dtype=torch.float64, device=dev)
-    a = (torch.einsum("sij,pj->spi", w2s[:, :3, :3], pixel_rays(camera, "cpu").to(dev).reshape(-1, 3))
+    a = (torch.einsum("sij,pj->spi", w2s[:, :3, :3], pixel_rays(camera, dev).reshape(-1, 3))
          * scale).float()                                               # [S, P, 3]
     t = (w2s[:, None, :3, 3] * scale).float()                           # [S, 1, 3]
     o = torch.tensor([2 * camera.cx / w - 1, 2 * camera.cy / h - 1], dtype=torch.float32, device=dev)
@@ -151,8 +151,8 @@ def depth_from_cost(cost: torch.Tensor, depths: torch.Tensor) -> tuple[torch.Ten
 
 def unproject(depth: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera) -> torch.Tensor:
     """``[H, W, 3]`` world points of a ``[H, W]`` depth map (depth along the optical axis)."""
-    p = pixel_rays(camera, "cpu") * depth.double()[..., None]
-    c2w = c2w.double()
+    p = pixel_rays(camera, depth.device) * depth.double()[..., None]
+    c2w = c2w.to(depth.device, torch.float64)
     return (p @ c2w[:3, :3].T + c2w[:3, 3]).float()
 
 

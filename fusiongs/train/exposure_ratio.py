@@ -130,17 +130,18 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         t = torch.as_tensor(times[batch])
         raw, _, _ = state.render(scene.camera, t, backend)
         lin = _coloured(raw, colour)
-        rendered[batch] = raw.cpu().numpy()
-        corrected[batch] = raw.cpu().numpy()
+        rendered[batch] = corrected[batch] = raw.cpu().numpy()
+        depth = state.render_depth(scene.camera, t, backend) if iterations else None  # once per batch
         for k, b in enumerate(batch):
-            tk, i = t[k:k + 1], int(frame[b])
+            i, tk = int(frame[b]), t[k:k + 1]
+            dk = None if depth is None else (depth[0][k:k + 1], depth[1][k:k + 1])
             if i >= 0:  # inside frame i's exposure
-                rho = factor(i)
-                fixed = lin[k] * (factor_carried(state, scene, rho, i, tk, backend)[0] if iterations else rho)
+                fixed = lin[k] * (factor_carried(state, scene, factor(i), i, tk, backend, dk)[0]
+                                  if iterations else factor(i))
             elif sides is not None and sides[b, 0] >= 0 and sides[b, 1] >= 0:
                 p, q, wp = int(sides[b, 0]), int(sides[b, 1]), float(sides[b, 2])
-                fixed = lin[k] * (wp * factor_carried(state, scene, factor(p), p, tk, backend)[0]
-                                  + (1.0 - wp) * factor_carried(state, scene, factor(q), q, tk, backend)[0])
+                at_p, at_q = (factor_carried(state, scene, factor(f), f, tk, backend, dk)[0] for f in (p, q))
+                fixed = lin[k] * (wp * at_p + (1.0 - wp) * at_q)
                 applied[b] = True
             else:
                 continue
@@ -158,16 +159,13 @@ def between_frames(t_start: np.ndarray, t_end: np.ndarray, times: np.ndarray) ->
     instants inside an exposure are ``(-1, -1, 0)``."""
     s, e = np.asarray(t_start, np.float64), np.asarray(t_end, np.float64)
     t = np.asarray(times, np.float64).reshape(-1)
-    out = np.zeros((t.size, 3))
-    out[:, :2] = -1
-    inside = containing_frame(s, e, t) >= 0
-    for b in np.flatnonzero(~inside):
-        before, after = np.flatnonzero(e <= t[b]), np.flatnonzero(s >= t[b])
-        p = int(before[np.argmax(e[before])]) if before.size else -1
-        q = int(after[np.argmin(s[after])]) if after.size else -1
-        wp = (s[q] - t[b]) / max(s[q] - e[p], 1e-12) if p >= 0 and q >= 0 else 0.0
-        out[b] = (p, q, wp)
-    return out
+    outside = containing_frame(s, e, t) < 0
+    p = np.searchsorted(e, t, side="right") - 1  # frames are in time order, exposures disjoint
+    q = np.searchsorted(s, t, side="left")
+    q = np.where(q < s.size, q, -1)
+    both = outside & (p >= 0) & (q >= 0)
+    wp = np.where(both, (s[q] - t) / np.maximum(s[q] - e[np.maximum(p, 0)], 1e-12), 0.0)
+    return np.stack([np.where(outside, p, -1), np.where(outside, q, -1), wp], 1).astype(np.float64)
 
 
 def _coloured(raw: torch.Tensor, colour: tuple[np.ndarray, np.ndarray] | None) -> torch.Tensor:
@@ -186,11 +184,13 @@ def _observed(fs, i: int, device: torch.device) -> tuple[torch.Tensor, torch.Ten
     return torch.as_tensor(linear).to(device), torch.as_tensor(encoded).to(device) >= SATURATED
 
 
-def _grid_to_mid(state: FusionState, scene: Scene, i: int, times: torch.Tensor, backend: str) -> torch.Tensor:
+def _grid_to_mid(state: FusionState, scene: Scene, i: int, times: torch.Tensor, backend: str,
+                 depth: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
     """``[T, H, W, 2]`` where the views at ``times`` see frame ``i``'s mid-exposure pixels
-    (:func:`~fusiongs.camera.reproject.reference_grid` on the fitted depth)."""
+    (:func:`~fusiongs.camera.reproject.reference_grid` on the fitted depth; ``depth``: the views'
+    :meth:`~fusiongs.train.state.FusionState.render_depth`, rendered here when None)."""
     fs = scene.frames
-    depth, alpha = state.render_depth(scene.camera, times, backend)
+    depth, alpha = state.render_depth(scene.camera, times, backend) if depth is None else depth
     t_mid = torch.tensor([0.5 * (fs.t_start[i] + fs.t_end[i])], dtype=torch.float64)
     return reference_grid(depth, alpha > 0.5, state.trajectory.c2w(times), state.trajectory.w2c(t_mid)[0],
                           scene.camera)
@@ -231,11 +231,15 @@ def frame_factor(state: FusionState, scene: Scene, i: int, log_gain: torch.Tenso
 
 @torch.no_grad()
 def factor_carried(state: FusionState, scene: Scene, factor: torch.Tensor, i: int, times: torch.Tensor,
-                   backend: str = "auto") -> torch.Tensor:
+                   backend: str = "auto", depth: tuple[torch.Tensor, torch.Tensor] | None = None
+                   ) -> torch.Tensor:
     """``[T, H, W, 3]`` frame ``i``'s factor (:func:`frame_factor`) where the views at ``times`` see the
     surfaces it is attached to: the detail of a frame carried along the fitted motion to other
-    instants (the held-out prediction of ``--holdout``, :func:`fusiongs.train.pipeline.score_holdout`)."""
-    return _rgb(carry(factor, _grid_to_mid(state, scene, i, times, backend)))
+    instants (the held-out prediction of ``--holdout``, :func:`fusiongs.train.pipeline.score_holdout`).
+    ``depth``: ``(depth, alpha)`` of those views when the caller already rendered them
+    (:meth:`~fusiongs.train.state.FusionState.render_depth`; carrying two frames' factors to the
+    same instants needs them once)."""
+    return _rgb(carry(factor, _grid_to_mid(state, scene, i, times, backend, depth)))
 
 
 def frame_log_gains(state: FusionState, n_frames: int, kept: np.ndarray | None = None) -> torch.Tensor:

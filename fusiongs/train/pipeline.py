@@ -211,8 +211,9 @@ def score_holdout(tr: Trained, scene: Scene, held: np.ndarray, kept: np.ndarray,
         with torch.no_grad():
             renders, _, _ = state.render(scene.camera, times, cfg.backend)
             ours = predict_blurry(renders, log_g, fs.response, channels, grey)
-            detail = torch.stack([renders * factor_carried(state, scene, factor(j), j, times, cfg.backend)
-                                  for j in sides]).mean(0)
+            depth = state.render_depth(scene.camera, times, cfg.backend)  # once for both sides
+            detail = torch.stack([renders * factor_carried(state, scene, factor(j), j, times, cfg.backend,
+                                                           depth) for j in sides]).mean(0)
             ours_ratio = predict_blurry(detail, log_g, fs.response, channels, grey)
         near = nearest_kept(mids, kept, i)
         preds = {"fusiongs": ours.cpu().numpy(), "fusiongs_ratio": ours_ratio.cpu().numpy(),
