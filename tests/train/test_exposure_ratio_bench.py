@@ -58,3 +58,13 @@ def test_novel_reproduces_the_runs_own_novel_scores(tiny_scene, tiny_run, tmp_pa
     assert row["between"] == pytest.approx(novel["fusiongs"]["psnr"], abs=1e-6)
     assert row["render"] == pytest.approx(novel["fusiongs_render"]["psnr"], abs=1e-6)
     assert row["between"] != pytest.approx(row["render"], abs=1e-3)
+
+
+def test_novel_without_truth_between_exposures_is_one_line_and_exit_2(tiny_scene, tiny_run, tmp_path, capsys):
+    no_novel = tmp_path / "scene"
+    shutil.copytree(tiny_scene, no_novel)
+    for p in (no_novel / "gt").glob("novel_*.png"):
+        p.unlink()
+    assert main([str(tiny_run), str(no_novel), "--novel"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "outside every exposure" in err
