@@ -158,7 +158,7 @@ def write_report(path, result: Mapping, history, methods: Mapping[str, Mapping[s
     rows = metric_rows(result)
     its = history.iteration
     curves = {"loss": list(zip(its, history.loss))}
-    for term in ("blur", "event", "event_lowpass", "edi", "intensity"):  # each term that was ever on
+    for term in ("blur", "event", "event_lowpass", "edi", "intensity", "tv"):  # each term that was ever on
         values = getattr(history, term)
         if any(np.isfinite(v) for v in values if v is not None):
             curves[term] = [(i, v) for i, v in zip(its, values) if v is not None]

@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import kornia
 import torch
 
 from fusiongs.errors import InputError
@@ -89,3 +90,60 @@ def intensity_prior_loss(
     flat = resid.detach().flatten(-3, -2)  # [..., H*W, C]
     offset = flat.median(dim=-2).values[..., None, None, :]  # [..., 1, 1, C]
     return (log_r + offset - hpf_log_image).abs().mean()
+
+
+def total_variation_prior(render: torch.Tensor, space: str = "log", eps: float = 1e-3) -> torch.Tensor:
+    """Anisotropic total variation of renders: ``mean |∂x f(L)| + mean |∂y f(L)|`` per channel.
+
+    Event-only reconstruction leaves whatever does not change along the camera's motion unobserved
+    (texture parallel to the motion, the levels of plain areas). Variational intensity reconstruction
+    from events fills that null space with the image of least total variation of the log intensity
+    (Bardow et al., CVPR 2016; Munda et al., IJCV 2018); this prior does the same for the renders.
+
+    Args:
+        render: ``[..., H, W, C]`` linear renders.
+        space: ``"log"`` for ``f(L) = log(L + eps)`` (the events' space), ``"srgb"`` for the sRGB
+            encoding of ``L`` clipped to ``[0, 1]`` (the space the results are scored in).
+        eps: log offset, as in the event losses.
+
+    Returns:
+        Scalar: the two axes' mean absolute differences, added, averaged over images and channels.
+    """
+    if render.ndim < 3:
+        raise InputError("total_variation_prior", "render", "[..., H, W, C]", f"{tuple(render.shape)}")
+    if space == "log":
+        f = torch.log(render.clamp_min(0) + eps)
+    elif space == "srgb":
+        f = apply_response(render.clamp(0, 1), "srgb")
+    else:
+        raise InputError("total_variation_prior", "space", "'log' or 'srgb'", repr(space))
+    return kornia.losses.total_variation(f.movedim(-1, -3), reduction="mean").mean()
+
+
+def smooth_log_gradient(grad: torch.Tensor, render: torch.Tensor, sigma: float, weight: float,
+                        eps: float = 1e-3) -> torch.Tensor:
+    """A render's gradient with its spatially smoothed copy added, in log intensity (a Sobolev-type
+    preconditioner: the steps of plain areas follow the changes their edges ask for).
+
+    ``g' = g + weight · (G_σ * (g · (L + eps))) / (L + eps)``: the gradient with respect to
+    ``log(L + eps)`` is ``g · (L + eps)``; its Gaussian low-pass (zeros outside the image) is added
+    back in linear units. The objective is unchanged; only the descent direction is (Sundaramoorthi
+    et al., "Sobolev active contours", IJCV 2007, for the idea of a smoothed gradient flow).
+
+    Args:
+        grad: ``[..., H, W, C]`` gradient of the loss with respect to the linear renders.
+        render: ``[..., H, W, C]`` the linear renders (values, no gradient needed).
+        sigma: the Gaussian's standard deviation (pixels, > 0).
+        weight: how much of the smoothed copy is added.
+        eps: log offset, as in the event losses.
+
+    Returns:
+        ``[..., H, W, C]`` the new gradient.
+    """
+    _check_pair("smooth_log_gradient", grad, render)
+    scale = render.detach().clamp_min(0) + eps
+    g_log = grad * scale
+    h, w, c = g_log.shape[-3:]
+    maps = g_log.reshape(-1, h, w, c).movedim(-1, 1).reshape(-1, h, w)  # [N C, H, W]
+    low = gaussian_blur(maps, sigma).reshape(-1, c, h, w).movedim(1, -1).reshape(g_log.shape)
+    return grad + weight * low / scale

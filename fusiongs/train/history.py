@@ -17,7 +17,7 @@ from fusiongs.errors import InputError
 from fusiongs.train.state import FusionState
 
 FLUSH_EVERY = 25  # iterations whose records are read back from the device at once (one sync)
-TERMS = ("blur", "event", "event_lowpass", "edi", "intensity")  # terms recorded (StepResult.parts keys)
+TERMS = ("blur", "event", "event_lowpass", "edi", "intensity", "tv")  # terms recorded (StepResult.parts keys)
 
 
 @dataclass
@@ -33,6 +33,7 @@ class History:
     event_lowpass: list[float] = field(default_factory=list)  # low-pass term of long windows
     edi: list[float] = field(default_factory=list)
     intensity: list[float] = field(default_factory=list)  # event-only mode's HPF anchor term
+    tv: list[float] = field(default_factory=list)  # event-only mode's total-variation prior (off by default)
     theta_pos: list[list[float]] = field(default_factory=list)
     theta_neg: list[list[float]] = field(default_factory=list)
     n_gaussians: list[int] = field(default_factory=list)
@@ -66,7 +67,7 @@ class PendingRow:
 
 def history_row(loss: torch.Tensor, parts: dict[str, torch.Tensor], state: FusionState,
          psnr: torch.Tensor | None) -> torch.Tensor:
-    """``[6 + 2C]`` float32 on the device: loss, blur, event, EDI and intensity terms (NaN when
+    """``[2 + len(TERMS) + 2C]`` float32 on the device: loss, the ``TERMS`` (NaN when
     off), running PSNR, θ+ ``[C]`` and θ− ``[C]`` (C channels of the threshold)."""
     nan = loss.new_full((), math.nan, dtype=torch.float32)
     terms = [loss, *(parts.get(k, nan) for k in TERMS), nan if psnr is None else psnr]

@@ -170,9 +170,16 @@ class EventOnlySettings:
     intensity_tau: float = 0.05      # τ of the HPF intensity image (s)
     anchor_highpass: float = 0.0     # > 0: the anchor compares only scales finer than a Gaussian
                                      # of this many pixels (priors.intensity_prior_loss)
+    tv_weight: float = 0.0           # weight of the renders' total variation (priors.total_variation_prior;
+                                     # fills what the motion leaves unobserved); 0 off
+    tv_space: Literal["log", "srgb"] = "log"  # ... of the log intensity or of the sRGB image
+    gradient_blur: float = 0.0       # σ (pixels) of the renders' smoothed log gradient added to the
+                                     # gradient (priors.smooth_log_gradient); 0 off
+    gradient_blur_weight: float = 1.0  # ... and its weight
 
     def __post_init__(self) -> None:
-        _need_positive("event_only", self, ("anchor_highpass",), zero_ok=True)
+        _need_positive("event_only", self, ("anchor_highpass", "tv_weight", "gradient_blur",
+                                            "gradient_blur_weight"), zero_ok=True)
 
 
 @dataclass

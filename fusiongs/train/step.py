@@ -28,7 +28,12 @@ from fusiongs.losses.event import (
     select_channel,
     to_grey,
 )
-from fusiongs.losses.priors import edi_prior_loss, intensity_prior_loss
+from fusiongs.losses.priors import (
+    edi_prior_loss,
+    intensity_prior_loss,
+    smooth_log_gradient,
+    total_variation_prior,
+)
 from fusiongs.render.rasterize import RenderMeta
 from fusiongs.train.crop import Crop
 from fusiongs.train.data import TrainData, block_mean, hpf_image_at
@@ -263,6 +268,11 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
     t0 = time.perf_counter()
     lin, _, meta = state.render(camera, t_host, cfg.backend, check_values=False)  # poses on the host
     render_seconds = time.perf_counter() - t0
+    eo = cfg.event_only
+    if not has_frames and eo.gradient_blur > 0 and lin.requires_grad:
+        values = lin.detach()
+        lin.register_hook(lambda g: smooth_log_gradient(g, values, eo.gradient_blur, eo.gradient_blur_weight,
+                                                        cfg.events.log_eps))
     parts: dict[str, torch.Tensor] = {}
     loss = lin.new_zeros(())
     if has_frames:
@@ -309,7 +319,6 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
         if readout is not None:
             anchors = [(base + 2 * i + 1, data.hpf[g]) for i, g in enumerate(readout.tolist())]
         elif chain and data.hpf is not None:
-            eo = cfg.event_only
             anchors = [(base + k, hpf_image_at(data, t, eo.intensity_tau, cfg.threshold.init))
                        for k, t in enumerate(t_list[base:]) if k > 0]
         if anchors:
@@ -318,4 +327,8 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                         for v, (_, a) in zip(seen, anchors)) / len(anchors)
             loss = loss + (1.0 - lam_ev) * l_int
             parts["intensity"] = l_int.detach()
+        if not has_frames and cfg.event_only.tv_weight > 0:
+            l_tv = total_variation_prior(lin[base:], cfg.event_only.tv_space, cfg.events.log_eps)
+            loss = loss + cfg.event_only.tv_weight * l_tv
+            parts["tv"] = l_tv.detach()
     return StepResult(loss=loss, parts=parts, meta=meta, renders=lin, render_seconds=render_seconds)

@@ -234,18 +234,19 @@ def test_records_are_read_back_together_and_a_diverged_loss_stops_training():
 
     h, bar = History(), Bar()
     nan = math.nan
-    # loss, blur, event, event_lowpass, edi, intensity, psnr_input, θ+, θ−
-    pending = [PendingRow(0, torch.tensor([1.0, 0.5, nan, nan, nan, nan, 20.0, 0.2, 0.3]), 10, 0.0),
-               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, 0.07, nan, 0.05, 21.0, 0.21, 0.31]), 12, 0.1)]
+    # loss, blur, event, event_lowpass, edi, intensity, tv, psnr_input, θ+, θ−
+    pending = [PendingRow(0, torch.tensor([1.0, 0.5, nan, nan, nan, nan, nan, 20.0, 0.2, 0.3]), 10, 0.0),
+               PendingRow(1, torch.tensor([0.9, 0.4, 0.1, 0.07, nan, 0.05, 0.02, 21.0, 0.21, 0.31]), 12, 0.1)]
     flush_pending(h, pending, bar)
     assert not pending and h.iteration == [0, 1] and h.n_gaussians == [10, 12]
     assert h.loss == pytest.approx([1.0, 0.9]) and math.isnan(h.event[0]) and h.event[1] == pytest.approx(0.1)
     assert h.theta_pos == [[pytest.approx(0.2)], [pytest.approx(0.21)]] and bar.postfix["n"] == 12
     assert h.theta_neg == [[pytest.approx(0.3)], [pytest.approx(0.31)]] and h.psnr_input[1] == 21.0
     assert math.isnan(h.intensity[0]) and h.intensity[1] == pytest.approx(0.05)
+    assert math.isnan(h.tv[0]) and h.tv[1] == pytest.approx(0.02)
     assert math.isnan(h.event_lowpass[0]) and h.event_lowpass[1] == pytest.approx(0.07)
     with pytest.raises(InputError, match="nan at iteration 2"):
-        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 9), 12, 0.1)], bar)
+        flush_pending(h, [PendingRow(2, torch.tensor([math.nan] * 10), 12, 0.1)], bar)
 
 
 # ------------------------------------------------------------------------------------------- CUDA

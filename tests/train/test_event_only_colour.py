@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+import torch
 
 from fusiongs.cli import main
 from fusiongs.eval.metrics import psnr
@@ -151,6 +152,31 @@ def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_
 
     with pytest.raises(ConfigError, match="output.exposure"):
         OutputSettings(exposure="max")
+
+
+def test_total_variation_prior_is_recorded_and_smooths_the_renders(events_only, tmp_path):
+    """event_only.tv_weight adds the renders' total variation to the loss: history.jsonl records
+    the term on every iteration (null when off), and a heavy weight leaves smoother renders."""
+    from fusiongs.losses.priors import total_variation_prior
+    from fusiongs.train.render_io import render_linear
+    from fusiongs.train.restore import restore_state
+
+    short = ["optim.iterations=40", "events.pixels=256", "event_only.alpha_warmup=5",
+             "event_only.alpha_ramp=5", "output.exposure=none"]
+    tv = {}
+    for weight in (0, 30):
+        run = tmp_path / f"tv{weight}"
+        _deblur(events_only, run, *short, f"event_only.tv_weight={weight}")
+        rows = [json.loads(line) for line in (run / "history.jsonl").read_text().splitlines()]
+        if weight:
+            assert all(r["tv"] is not None and math.isfinite(r["tv"]) for r in rows)
+        else:
+            assert all(r["tv"] is None for r in rows)
+        state, camera, _ = restore_state(run / "checkpoint.pt")
+        times = [r["t"] for r in json.loads((events_only / "scene.json").read_text())["renders"]]
+        lin = torch.as_tensor(render_linear(state, camera, times, "auto"))
+        tv[weight] = float(total_variation_prior(lin, "log"))
+    assert tv[30] < 0.7 * tv[0], tv
 
 
 def _one_line_exit_2(argv, capfd) -> str:
