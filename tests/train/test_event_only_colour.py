@@ -179,6 +179,26 @@ def test_total_variation_prior_is_recorded_and_smooths_the_renders(events_only, 
     assert tv[30] < 0.7 * tv[0], tv
 
 
+def test_gradient_blur_changes_event_only_training_and_only_it(events_only, one_frame, tmp_path):
+    """event_only.gradient_blur reshapes the renders' gradient (the loss is the same): the run's
+    Gaussians end elsewhere than without it, and a scene with a frame is trained as before."""
+    from fusiongs.train.restore import restore_state
+
+    short = ["optim.iterations=12", "events.pixels=256", "event_only.alpha_warmup=2",
+             "event_only.alpha_ramp=2", "events.warmup=2"]
+
+    def means(scene, name, *extra):
+        _deblur(scene, tmp_path / name, *short, *extra)
+        return restore_state(tmp_path / name / "checkpoint.pt")[0].model.means.detach().clone()
+
+    plain, again = means(events_only, "a"), means(events_only, "b")
+    torch.testing.assert_close(plain, again)  # the comparison below is not run-to-run noise
+    blurred = means(events_only, "c", "event_only.gradient_blur=3")
+    assert not torch.allclose(plain, blurred)
+    framed = means(one_frame, "d")
+    torch.testing.assert_close(means(one_frame, "e", "event_only.gradient_blur=3"), framed)
+
+
 def _one_line_exit_2(argv, capfd) -> str:
     assert main(argv) == 2
     err = capfd.readouterr().err.strip().splitlines()
