@@ -131,14 +131,17 @@ def corrected_renders(state: FusionState, scene: Scene, times, log_gain: torch.T
         raw, _, _ = state.render(scene.camera, t, backend)
         lin = _coloured(raw, colour)
         rendered[batch] = corrected[batch] = raw.cpu().numpy()
-        depth = state.render_depth(scene.camera, t, backend) if iterations else None  # once per batch
+        gap = np.zeros(batch.size, bool) if sides is None else (sides[batch, :2] >= 0).all(1)  # between two
+        # the views' depth once per batch, and only when one of its instants gets a factor carried
+        depth = state.render_depth(scene.camera, t, backend) if iterations and (
+            (frame[batch] >= 0) | gap).any() else None
         for k, b in enumerate(batch):
             i, tk = int(frame[b]), t[k:k + 1]
             dk = None if depth is None else (depth[0][k:k + 1], depth[1][k:k + 1])
             if i >= 0:  # inside frame i's exposure
                 fixed = lin[k] * (factor_carried(state, scene, factor(i), i, tk, backend, dk)[0]
                                   if iterations else factor(i))
-            elif sides is not None and sides[b, 0] >= 0 and sides[b, 1] >= 0:
+            elif gap[k]:
                 p, q, wp = int(sides[b, 0]), int(sides[b, 1]), float(sides[b, 2])
                 at_p, at_q = (factor_carried(state, scene, factor(f), f, tk, backend, dk)[0] for f in (p, q))
                 fixed = lin[k] * (wp * at_p + (1.0 - wp) * at_q)

@@ -328,7 +328,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
             loss = loss + (1.0 - lam_ev) * l_int
             parts["intensity"] = l_int.detach()
         if not has_frames and cfg.event_only.tv_weight > 0:
-            l_tv = total_variation_prior(lin[base:], cfg.event_only.tv_space, cfg.events.log_eps)
+            l_tv = total_variation_prior(lin, cfg.event_only.tv_space, cfg.events.log_eps)  # every window end
             loss = loss + cfg.event_only.tv_weight * l_tv
             parts["tv"] = l_tv.detach()
     return StepResult(loss=loss, parts=parts, meta=meta, renders=lin, render_seconds=render_seconds)

@@ -157,6 +157,9 @@ def test_total_variation_prior_bad_input_and_setting():
         resolve_config("event_only", ["event_only.tv_weight=-1"])
     with pytest.raises(ConfigError, match=r"event_only.tv_space"):
         resolve_config("event_only", ["event_only.tv_space=lin"])
+    for key in ("gradient_blur", "gradient_blur_weight"):
+        with pytest.raises(ConfigError, match=rf"event_only.{key}: expected a finite number >= 0"):
+            resolve_config("event_only", [f"event_only.{key}=-2"])
 
 
 def test_smooth_log_gradient_matches_pixel_by_pixel_reference():
