@@ -161,17 +161,14 @@ def true_thresholds(scene: Path) -> tuple[torch.Tensor, torch.Tensor]:
     return torch.as_tensor(on * scale, dtype=torch.float32), torch.as_tensor(off * scale, dtype=torch.float32)
 
 
-def resimulate(scene: Path, out: Path, sensor: str) -> Path:
-    """Write ``scene`` again to ``out`` with some ``DVSParams`` fields changed (``sensor``:
-    ``name=value,...``, e.g. ``refractory_s=0,ba_rate_hz=0``): the same seed, scene, camera path
-    and thresholds, another sensor model. Returns ``out``."""
+def parse_sensor(sensor: str) -> dict[str, float]:
+    """``"name=value,..."`` -> ``{name: value}`` for fields of :class:`fusiongs.sim.dvs.DVSParams`;
+    raises ValueError naming the bad item."""
     import dataclasses
 
-    from fusiongs.sim.simulate import run_simulation
-    from fusiongs.sim.write import write_simulated_scene
+    from fusiongs.sim.dvs import DVSParams
 
-    cfg = sim_config(scene)
-    fields = {f.name for f in dataclasses.fields(cfg.dvs)}
+    fields = {f.name for f in dataclasses.fields(DVSParams)}
     changes = {}
     for item in sensor.split(","):
         name, _, value = item.partition("=")
@@ -181,9 +178,25 @@ def resimulate(scene: Path, out: Path, sensor: str) -> Path:
             changes[name] = float(value)
         except ValueError:
             raise ValueError(f"--sensor: {name}: expected a number, got {value!r}") from None
+    return changes
+
+
+def resimulate(scene: Path, out: Path, sensor: str) -> Path:
+    """Write ``scene`` again to ``out`` with some ``DVSParams`` fields changed (``sensor``:
+    ``name=value,...``, e.g. ``refractory_s=0,ba_rate_hz=0``): the same seed, scene, camera path
+    and thresholds, another sensor model, with its own ``gt/sim.json``. Returns ``out``."""
+    import dataclasses
+
+    from fusiongs.sim.simulate import run_simulation
+    from fusiongs.sim.write import write_simulated_scene
+
+    cfg = sim_config(scene)
+    changes = parse_sensor(sensor)
     cfg = dataclasses.replace(cfg, dvs=dataclasses.replace(cfg.dvs, **changes))
     res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, out, overwrite=True)
+    sweep = json.loads((scene / "gt" / "sim.json").read_text()).get("sweep")
+    stats = res.stats | ({"sweep": sweep} if sweep else {})  # the twin's own facts, its sweep draw kept
+    write_simulated_scene(res.scene, res.gt, out, stats=stats, overwrite=True)
     print(json.dumps({"resimulated": str(out), "events": len(res.scene.events), **changes}))
     return out
 
@@ -400,7 +413,7 @@ def main(argv=None) -> int:
 
     if args.sensor:
         if args.oracle or args.true_geometry or args.true_theta or args.censor_oracle:
-            p.error("--sensor: the re-simulated scene has no gt/sim.json; use it without the truth options")
+            p.error("--sensor: not with the truth options (they were written for the scene as drawn)")
         try:
             args.scene = resimulate(args.scene, args.out.parent / f"{args.out.name}_scene", args.sensor)
         except ValueError as err:
