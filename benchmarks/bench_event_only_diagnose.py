@@ -88,9 +88,11 @@ class TrueLog:
         return (1.0 - w) * self.logs[k] + w * self.logs[k + 1]
 
 
-def install_oracle(truth: TrueLog) -> None:
+def install_oracle(truth: TrueLog, units: float = 1.0) -> None:
     """Replace the training step's event loss by the mse against the true log change (same
-    sampled pixels; grey sensors and colour ``mask`` mode, whole-sensor renders)."""
+    sampled pixels; grey sensors and colour ``mask`` mode, whole-sensor renders), the residual
+    divided by ``units`` (log units by default; the scene's mean threshold gives count units, a
+    term of about the band loss's size, so the anchor and the low-pass term keep their default share)."""
     import fusiongs.train.step as step
     from fusiongs.losses.colour import channel_weights_for
 
@@ -102,13 +104,13 @@ def install_oracle(truth: TrueLog) -> None:
         target = (truth.at(t_b) - truth.at(t_a))[pix, None].to(lin_a)
         if data.cfa_index is None:
             d = delta_log(la, lb, "grey", ev.grey_weights, ev.log_eps)
-            return ((d - target) ** 2).mean()
+            return (((d - target) / units) ** 2).mean()
         if ev.colour_mode != "mask":
             raise SystemExit("the oracle supports grey sensors and events.colour_mode=mask")
         ch = data.cfa_index.reshape(-1)[pix]
         d = select_channel(delta_log(la, lb, "rgb", eps=ev.log_eps), ch)
         w = channel_weights_for(ch, ev.channel_weights)
-        return (w * (d - target) ** 2).sum() / w.sum()
+        return (w * ((d - target) / units) ** 2).sum() / w.sum()
 
     step.event_window_loss = oracle_window_loss
 
@@ -374,6 +376,8 @@ def main(argv=None) -> int:
     p.add_argument("scene", type=Path)
     p.add_argument("out", type=Path, nargs="?")
     p.add_argument("--oracle", action="store_true", help="true log changes as event targets")
+    p.add_argument("--oracle-counts", action="store_true",
+                   help="the oracle's residual in count units (divided by the scene's mean true threshold)")
     p.add_argument("--max-window", type=float, default=None, help="cap on free windows (s)")
     p.add_argument("--floor", action="store_true", help="print the HPF floor and exit")
     p.add_argument("--true-geometry", action="store_true", help="first Gaussians on the true surfaces")
@@ -403,6 +407,8 @@ def main(argv=None) -> int:
                 "and --stereo-accuracy need a scene written by fusiongs simulate")
     if args.out is None and not (args.floor or args.stereo_accuracy):
         p.error("OUT: expected an output folder for the training run")
+    if args.oracle_counts and not args.oracle:
+        p.error("--oracle-counts: only with --oracle")
     if args.floor:
         print(json.dumps(hpf_floor(args.scene)))
         return 0
@@ -419,7 +425,10 @@ def main(argv=None) -> int:
         except ValueError as err:
             p.error(str(err))
     if args.oracle:
-        install_oracle(TrueLog(*true_logs(args.scene)))
+        facts_doc = json.loads(facts.read_text())
+        units = (float(np.sqrt(facts_doc["theta_on"] * facts_doc["theta_off"])
+                       * facts_doc.get("threshold_scale", 1.0)) if args.oracle_counts else 1.0)
+        install_oracle(TrueLog(*true_logs(args.scene)), units)
     if args.max_window is not None:
         install_max_window(args.max_window)
     if args.true_geometry:
