@@ -45,6 +45,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from fusiongs.eval.truth import read_sim_facts  # noqa: E402
 from fusiongs.losses.event import delta_log, sample_event_pixels, select_channel  # noqa: E402
 
 
@@ -196,7 +197,7 @@ def resimulate(scene: Path, out: Path, sensor: str) -> Path:
     changes = parse_sensor(sensor)
     cfg = dataclasses.replace(cfg, dvs=dataclasses.replace(cfg.dvs, **changes))
     res = run_simulation(cfg)
-    sweep = json.loads((scene / "gt" / "sim.json").read_text()).get("sweep")
+    sweep = (read_sim_facts(scene) or {}).get("sweep")
     stats = res.stats | ({"sweep": sweep} if sweep else {})  # the twin's own facts, its sweep draw kept
     write_simulated_scene(res.scene, res.gt, out, stats=stats, overwrite=True)
     print(json.dumps({"resimulated": str(out), "events": len(res.scene.events), **changes}))
@@ -425,9 +426,9 @@ def main(argv=None) -> int:
         except ValueError as err:
             p.error(str(err))
     if args.oracle:
-        facts_doc = json.loads(facts.read_text())
-        units = (float(np.sqrt(facts_doc["theta_on"] * facts_doc["theta_off"])
-                       * facts_doc.get("threshold_scale", 1.0)) if args.oracle_counts else 1.0)
+        doc = read_sim_facts(args.scene)
+        units = (float(np.sqrt(doc["theta_on"] * doc["theta_off"]) * doc.get("threshold_scale", 1.0))
+                 if args.oracle_counts else 1.0)
         install_oracle(TrueLog(*true_logs(args.scene)), units)
     if args.max_window is not None:
         install_max_window(args.max_window)
