@@ -1,4 +1,9 @@
-"""``fusiongs render OUT --t ...``: sharp images at any instants from a finished run.
+"""``fusiongs render OUT --t ...`` or ``--poses FILE``: sharp images from a finished run, at instants
+on its fitted camera path or from camera poses of your own (novel views), optionally as a video.
+
+Poses are a TUM text file (``t tx ty tz qx qy qz qw``, camera-to-world, OpenCV axes) in the run's
+world frame: that of the run's refined ``trajectory.txt``, so an edited copy of it (a shifted or
+rotated camera) renders the scene from there. Its ``t`` column only names and orders the images.
 
 These are the model's renders: the exposure-ratio correction of ``fusiongs deblur``'s deblurred
 frames needs the scene's frames and is not applied here (docs/method.md). An event-only run's
@@ -13,15 +18,24 @@ from collections.abc import Sequence
 
 from fusiongs.errors import InputError
 
-HELP = "render sharp images at given instants (seconds) from a finished deblur run"
+HELP = "render sharp images at given instants (seconds) or camera poses from a finished deblur run"
+VIDEO_FILE = "renders.mp4"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("run", help="output folder of `fusiongs deblur` (holds checkpoint.pt)")
-    p.add_argument("--t", type=float, nargs="+", required=True,
-                   help="instants in seconds, inside the recording's time range")
+    which = p.add_mutually_exclusive_group(required=True)
+    which.add_argument("--t", type=float, nargs="+",
+                       help="instants in seconds, inside the recording's time range")
+    which.add_argument("--poses", metavar="FILE",
+                       help="TUM file of camera-to-world poses in the run's world frame (e.g. an "
+                            "edited copy of RUN/trajectory.txt): one image per pose")
     p.add_argument("-o", "--output", "--out", dest="out", default=None,
-                   help="folder for the PNGs (default RUN/renders_t)")
+                   help="folder for the PNGs (default RUN/renders_t, or RUN/renders_poses)")
+    p.add_argument("--video", action="store_true",
+                   help=f"also write the images in order as an H.264 video, OUT/{VIDEO_FILE}")
+    p.add_argument("--fps", type=float, default=None,
+                   help="frames per second of --video (default the run's output.video_fps)")
 
 
 def check_instants(times: Sequence[float], t_min: float, t_max: float, where: str = "--t") -> None:
@@ -39,18 +53,32 @@ def check_instants(times: Sequence[float], t_min: float, t_max: float, where: st
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from fusiongs.camera.tum import read_tum
+    from fusiongs.eval.video import write_mp4
     from fusiongs.frames.image_io import write_png
     from fusiongs.train.outputs import read_exposure
     from fusiongs.train.render_io import render_srgb
     from fusiongs.train.restore import restore_state
 
+    if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
+        raise InputError("fusiongs render", "--fps", "a positive number of frames per second", args.fps)
+    poses = read_tum(args.poses) if args.poses else None  # bad files fail before the checkpoint loads
     state, camera, cfg = restore_state(Path(args.run) / "checkpoint.pt")
-    check_instants(args.t, state.trajectory.t_min, state.trajectory.t_max)
-    out = Path(args.out) if args.out else Path(args.run) / "renders_t"
+    if poses is None:
+        check_instants(args.t, state.trajectory.t_min, state.trajectory.t_max)
+        times, prefix, default = list(args.t), "t", "renders_t"
+    else:
+        times, prefix, default = list(poses.t), "pose", "renders_poses"
+    out = Path(args.out) if args.out else Path(args.run) / default
     # an event-only run's gain (exposure.json), so that these match its renders
-    imgs = render_srgb(state, camera, args.t, cfg["backend"], gain=read_exposure(Path(args.run)))
-    for t, img in zip(args.t, imgs):
-        path = out / f"t_{t:.6f}.png"
+    imgs = render_srgb(state, camera, times, cfg["backend"], gain=read_exposure(Path(args.run)),
+                       poses=None if poses is None else poses.c2w)
+    for t, img in zip(times, imgs):
+        path = out / f"{prefix}_{t:.6f}.png"
         write_png(path, img)
         print(path)
+    if args.video:
+        fps = args.fps if args.fps is not None else float(cfg.get("output", {}).get("video_fps", 12))
+        write_mp4(out / VIDEO_FILE, list(imgs), fps)
+        print(out / VIDEO_FILE)
     return 0

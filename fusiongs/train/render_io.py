@@ -32,22 +32,31 @@ def exposure_gain(linear: np.ndarray) -> float:
 
 
 @torch.no_grad()
-def render_linear(state: FusionState, camera, times, backend: str = "auto", batch: int = 8) -> np.ndarray:
-    """Sharp linear renders ``[T, H, W, 3]`` float32 (not clipped) at instants ``times`` (s)."""
-    t = torch.as_tensor(np.asarray(times, dtype=np.float64))
+def render_linear(state: FusionState, camera, times, backend: str = "auto", batch: int = 8,
+                  poses: np.ndarray | None = None) -> np.ndarray:
+    """Sharp linear renders ``[T, H, W, 3]`` float32 (not clipped) at instants ``times`` (s) on the
+    fitted path, or, when ``poses`` ``[T, 4, 4]`` (camera-to-world, the run's world frame) are
+    given, from those poses (``times`` is then ignored)."""
+    if poses is None:
+        views = torch.as_tensor(np.asarray(times, dtype=np.float64))
+        draw = state.render
+    else:
+        views = torch.as_tensor(np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4))
+        draw = state.render_poses
     out = []
-    for i in range(0, t.shape[0], batch):
-        lin, _, _ = state.render(camera, t[i:i + batch], backend)
+    for i in range(0, views.shape[0], batch):
+        lin, _, _ = draw(camera, views[i:i + batch], backend)
         out.append(lin.float().cpu().numpy())
     return np.concatenate(out) if out else np.zeros((0, camera.height, camera.width, 3), np.float32)
 
 
 def render_srgb(state: FusionState, camera, times, backend: str = "auto", batch: int = 8,
-                auto_exposure: bool = False, gain: float = 1.0) -> np.ndarray:
-    """Sharp sRGB renders ``[T, H, W, 3]`` in [0, 1] at instants ``times`` (s): times ``gain``,
-    or the :func:`exposure_gain` of these renders when ``auto_exposure``, then clipped to [0, 1]
-    in linear light."""
-    lin = render_linear(state, camera, times, backend, batch)
+                auto_exposure: bool = False, gain: float = 1.0, poses: np.ndarray | None = None
+                ) -> np.ndarray:
+    """Sharp sRGB renders ``[T, H, W, 3]`` in [0, 1] at instants ``times`` (s), or from ``poses``
+    (:func:`render_linear`): times ``gain``, or the :func:`exposure_gain` of these renders when
+    ``auto_exposure``, then clipped to [0, 1] in linear light."""
+    lin = render_linear(state, camera, times, backend, batch, poses)
     return exposed_srgb(lin, exposure_gain(lin) if auto_exposure else gain)
 
 

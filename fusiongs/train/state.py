@@ -6,6 +6,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from fusiongs.camera.lie import rigid_inverse
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.losses.threshold import ContrastThreshold
@@ -45,10 +46,15 @@ class FusionState(nn.Module):
 
     def _views(self, camera: PinholeCamera, t: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """``(viewmats [T, 4, 4], Ks [T, 3, 3])`` at instants ``t`` on the Gaussians' device and dtype."""
+        # the view matrices are made where the trajectory lives and copied without waiting
+        return self._on_device(camera, self.trajectory.w2c(t.to(torch.float64)))
+
+    def _on_device(self, camera: PinholeCamera, w2c: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(viewmats, Ks)`` of world-to-camera matrices ``w2c`` ``[T, 4, 4]``, copied without
+        waiting to the Gaussians' device and dtype."""
         m = self.model
         device = m.means.device
-        # the view matrices are made where the trajectory lives and copied without waiting
-        viewmats = self.trajectory.w2c(t.to(torch.float64)).to(device, m.means.dtype, non_blocking=True)
+        viewmats = w2c.to(device, m.means.dtype, non_blocking=True)
         # K is made on the host and copied without waiting (torch.tensor(..., device=cuda) waits)
         K = camera.K(dtype=m.means.dtype, device="cpu").to(device, non_blocking=True)
         return viewmats, K.expand(viewmats.shape[0], 3, 3)
@@ -61,13 +67,29 @@ class FusionState(nn.Module):
         another device is copied there, which waits for it); ``check_values=False`` skips the
         rasteriser's value checks (host syncs on a GPU).
         """
+        return self._rasterize(camera, *self._views(camera, t), backend, check_values)
+
+    def render_poses(self, camera: PinholeCamera, c2w: torch.Tensor, backend: str = "auto"
+                     ) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
+        """Sharp linear renders from given camera poses, not the fitted path (novel views).
+
+        Args:
+            camera: the intrinsics.
+            c2w: ``[T, 4, 4]`` camera-to-world rigid transforms in the run's world frame (that of
+                its refined ``trajectory.txt``; OpenCV axes), any device and float dtype.
+
+        Returns:
+            ``([T, H, W, 3] linear colours, alphas, meta)`` as :meth:`render`.
+        """
+        w2c = rigid_inverse(c2w.detach().to("cpu", torch.float64))
+        return self._rasterize(camera, *self._on_device(camera, w2c), backend, True)
+
+    def _rasterize(self, camera: PinholeCamera, viewmats: torch.Tensor, Ks: torch.Tensor, backend: str,
+                   check_values: bool) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
         m = self.model
-        viewmats, Ks = self._views(camera, t)
-        colors, alphas, meta = rasterize(m.means, m.rotations, m.scales, m.opacities, m.sh_coeffs(),
-                                         viewmats, Ks, camera.width, camera.height,
-                                         sh_degree=m.active_sh_degree, backend=backend,
-                                         check_values=check_values)
-        return colors, alphas, meta
+        return rasterize(m.means, m.rotations, m.scales, m.opacities, m.sh_coeffs(), viewmats, Ks,
+                         camera.width, camera.height, sh_degree=m.active_sh_degree, backend=backend,
+                         check_values=check_values)
 
     @torch.no_grad()
     def render_depth(self, camera: PinholeCamera, t: torch.Tensor, backend: str = "auto"

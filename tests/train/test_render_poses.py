@@ -1,0 +1,89 @@
+"""``fusiongs render --poses``: novel views of a finished run from camera poses of one's own."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from fusiongs.camera.tum import PoseSamples, read_tum, write_tum
+from fusiongs.cli import main
+from fusiongs.frames.image_io import read_image
+from fusiongs.train.restore import restore_state
+
+
+@pytest.fixture(scope="module")
+def restored(tiny_run):
+    return restore_state(tiny_run / "checkpoint.pt")
+
+
+def test_render_poses_equals_render_at_the_instants_of_those_poses(restored):
+    # The same view matrices two ways: the fitted path's poses handed back as poses.
+    state, camera, _ = restored
+    t = torch.tensor([0.02, 0.05, 0.09], dtype=torch.float64)
+    with torch.no_grad():
+        c2w = state.trajectory.c2w(t)
+        a, alpha_a, _ = state.render(camera, t)
+        b, alpha_b, _ = state.render_poses(camera, c2w)
+    assert b.shape == (3, camera.height, camera.width, 3)
+    torch.testing.assert_close(b, a, rtol=0, atol=1e-6)
+    torch.testing.assert_close(alpha_b, alpha_a, rtol=0, atol=1e-6)
+
+
+def test_a_moved_camera_sees_the_scene_moved(restored):
+    # A camera moved along its own x axis (right, OpenCV axes) sees the scene move left in the image:
+    # the new image at column x looks like the old one at x + s for some s > 0, not s <= 0.
+    state, camera, _ = restored
+    with torch.no_grad():
+        c2w = state.trajectory.c2w(torch.tensor([0.05], dtype=torch.float64))
+        right = c2w.clone()
+        right[:, :3, 3] += 0.5 * c2w[:, :3, 0]
+        a, _, _ = state.render_poses(camera, c2w)
+        b, _, _ = state.render_poses(camera, right)
+    grey_a, grey_b = a[0].mean(-1), b[0].mean(-1)
+    w = grey_a.shape[1]
+
+    def mismatch(s):  # mean |b(x) - a(x + s)| over the columns both hold
+        lo, hi = max(0, s), max(0, -s)
+        return float((grey_b[:, hi: w - lo] - grey_a[:, lo: w - hi]).abs().mean())
+    errs = {s: mismatch(s) for s in range(-6, 7)}
+    assert min(errs, key=errs.get) > 0, errs
+
+
+def test_the_command_writes_one_image_per_pose_and_a_video(tiny_run, tmp_path, capsys):
+    path = tmp_path / "poses.txt"
+    fitted = read_tum(tiny_run / "trajectory.txt")
+    pick = np.linspace(0, len(fitted) - 1, 3).round().astype(int)
+    write_tum(path, PoseSamples(fitted.t[pick], fitted.c2w[pick]))
+    out = tmp_path / "out"
+    assert main(["render", str(tiny_run), "--poses", str(path), "-o", str(out), "--video", "--fps", "5"]) == 0
+    files = sorted(out.glob("pose_*.png"))
+    assert [f.name for f in files] == [f"pose_{t:.6f}.png" for t in fitted.t[pick]]
+    assert (out / "renders.mp4").stat().st_size > 0
+    # the fitted path's own poses give the images `--t` gives at their instants (8-bit, 9 decimals)
+    assert main(["render", str(tiny_run), "--t", *(repr(float(t)) for t in fitted.t[pick[1:2]]),
+                 "-o", str(tmp_path / "t")]) == 0
+    by_t = read_image(next((tmp_path / "t").glob("t_*.png")))
+    assert np.abs(read_image(files[1]) - by_t).max() <= 1.5 / 255
+
+
+@pytest.mark.parametrize("text, words", [
+    ("0 0 0 0 0 0 0\n", ["poses.txt", "line 1", "8 finite numbers"]),
+    ("0 0 0 0 0 0 0 2\n", ["poses.txt", "line 1", "unit quaternion"]),
+    ("# nothing\n", ["poses.txt", "at least one pose"]),
+])
+def test_a_bad_poses_file_is_one_line_and_exit_2(tiny_run, tmp_path, capsys, text, words):
+    path = tmp_path / "poses.txt"
+    path.write_text(text)
+    assert main(["render", str(tiny_run), "--poses", str(path), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and all(w in err[0] for w in words), err
+    assert not (tmp_path / "o").exists()
+
+
+def test_fps_must_be_positive_and_t_and_poses_exclude_each_other(tiny_run, tmp_path, capsys):
+    assert main(["render", str(tiny_run), "--t", "0.05", "--video", "--fps", "0", "-o", str(tmp_path)]) == 2
+    assert "--fps" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["render", str(tiny_run), "--t", "0.05", "--poses", str(tmp_path / "p.txt")])
+    assert e.value.code == 2
