@@ -20,6 +20,7 @@ from fusiongs.errors import InputError
 
 HELP = "render sharp images at given instants (seconds) or camera poses from a finished deblur run"
 VIDEO_FILE = "renders.mp4"
+MAX_SCALE = 8.0  # --scale beyond this is a typo more likely than a wish (64x the pixels)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -32,6 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                             "edited copy of RUN/trajectory.txt): one image per pose")
     p.add_argument("-o", "--output", "--out", dest="out", default=None,
                    help="folder for the PNGs (default RUN/renders_t, or RUN/renders_poses)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help=f"render at this many times the camera's resolution (0 < S <= {MAX_SCALE:g}; "
+                        "the intrinsics scaled with it)")
     p.add_argument("--video", action="store_true",
                    help=f"also write the images in order as an H.264 video, OUT/{VIDEO_FILE}")
     p.add_argument("--fps", type=float, default=None,
@@ -62,8 +66,12 @@ def run(args: argparse.Namespace) -> int:
 
     if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
         raise InputError("fusiongs render", "--fps", "a positive number of frames per second", args.fps)
+    if not (math.isfinite(args.scale) and 0 < args.scale <= MAX_SCALE):
+        raise InputError("fusiongs render", "--scale", f"a factor in (0, {MAX_SCALE:g}]", args.scale)
     poses = read_tum(args.poses) if args.poses else None  # bad files fail before the checkpoint loads
     state, camera, cfg = restore_state(Path(args.run) / "checkpoint.pt")
+    if args.scale != 1.0:
+        camera = camera.scaled(args.scale)
     if poses is None:
         check_instants(args.t, state.trajectory.t_min, state.trajectory.t_max)
         times, prefix, default = list(args.t), "t", "renders_t"

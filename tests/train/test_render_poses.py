@@ -87,3 +87,19 @@ def test_fps_must_be_positive_and_t_and_poses_exclude_each_other(tiny_run, tmp_p
     with pytest.raises(SystemExit) as e:
         main(["render", str(tiny_run), "--t", "0.05", "--poses", str(tmp_path / "p.txt")])
     assert e.value.code == 2
+
+
+def test_scale_renders_the_same_view_at_more_pixels(tiny_run, tmp_path, capsys):
+    assert main(["render", str(tiny_run), "--t", "0.05", "-o", str(tmp_path / "x1")]) == 0
+    assert main(["render", str(tiny_run), "--t", "0.05", "--scale", "2", "-o", str(tmp_path / "x2")]) == 0
+    one = read_image(next((tmp_path / "x1").glob("t_*.png")))
+    two = read_image(next((tmp_path / "x2").glob("t_*.png")))
+    h, w = one.shape[:2]
+    assert two.shape == (2 * h, 2 * w, 3)
+    pooled = two.reshape(h, 2, w, 2, 3).mean((1, 3))  # 2x2 blocks (in sRGB: close enough here)
+    assert np.abs(pooled - one).mean() < 0.005
+    shifted = np.roll(pooled, 2, axis=1)  # a view moved by 2 px matches worse: the test can fail
+    assert np.abs(shifted - one).mean() > np.abs(pooled - one).mean()
+    for bad in ("0", "-1", "9", "nan"):
+        assert main(["render", str(tiny_run), "--t", "0.05", "--scale", bad, "-o", str(tmp_path / "b")]) == 2
+        assert "--scale" in capsys.readouterr().err
