@@ -4,6 +4,9 @@ on its fitted camera path or from camera poses of your own (novel views), option
 Poses are a TUM text file (``t tx ty tz qx qy qz qw``, camera-to-world, OpenCV axes) in the run's
 world frame: that of the run's refined ``trajectory.txt``, so an edited copy of it (a shifted or
 rotated camera) renders the scene from there. Its ``t`` column only names and orders the images.
+``--depth`` adds each view's depth along the optical axis (scene units: metres only when the
+scene's trajectory is metric; an estimated one has its own scale), NaN where the Gaussians'
+accumulated opacity is under one half.
 
 These are the model's renders: the exposure-ratio correction of ``fusiongs deblur``'s deblurred
 frames needs the scene's frames and is not applied here (docs/method.md). An event-only run's
@@ -36,6 +39,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scale", type=float, default=1.0,
                    help=f"render at this many times the camera's resolution (0 < S <= {MAX_SCALE:g}; "
                         "the intrinsics scaled with it)")
+    p.add_argument("--depth", action="store_true",
+                   help="also write each view's depth along the optical axis (scene units; NaN where "
+                        "nothing was rendered) as float32 <name>_depth.npy")
     p.add_argument("--video", action="store_true",
                    help=f"also write the images in order as an H.264 video, OUT/{VIDEO_FILE}")
     p.add_argument("--fps", type=float, default=None,
@@ -57,11 +63,14 @@ def check_instants(times: Sequence[float], t_min: float, t_max: float, where: st
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    import numpy as np
+
+    from fusiongs.atomic import atomic_path
     from fusiongs.camera.tum import read_tum
     from fusiongs.eval.video import write_mp4
     from fusiongs.frames.image_io import write_png
     from fusiongs.train.outputs import read_exposure
-    from fusiongs.train.render_io import render_srgb
+    from fusiongs.train.render_io import render_depth_maps, render_srgb
     from fusiongs.train.restore import restore_state
 
     if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
@@ -79,12 +88,17 @@ def run(args: argparse.Namespace) -> int:
         times, prefix, default = list(poses.t), "pose", "renders_poses"
     out = Path(args.out) if args.out else Path(args.run) / default
     # an event-only run's gain (exposure.json), so that these match its renders
-    imgs = render_srgb(state, camera, times, cfg["backend"], gain=read_exposure(Path(args.run)),
-                       poses=None if poses is None else poses.c2w)
-    for t, img in zip(times, imgs):
-        path = out / f"{prefix}_{t:.6f}.png"
-        write_png(path, img)
-        print(path)
+    c2w = None if poses is None else poses.c2w
+    imgs = render_srgb(state, camera, times, cfg["backend"], gain=read_exposure(Path(args.run)), poses=c2w)
+    depths = render_depth_maps(state, camera, times, cfg["backend"], poses=c2w) if args.depth else None
+    for k, (t, img) in enumerate(zip(times, imgs)):
+        name = f"{prefix}_{t:.6f}"
+        write_png(out / f"{name}.png", img)
+        print(out / f"{name}.png")
+        if depths is not None:
+            with atomic_path(out / f"{name}_depth.npy") as tmp:
+                np.save(tmp, depths[k])
+            print(out / f"{name}_depth.npy")
     if args.video:
         fps = args.fps if args.fps is not None else float(cfg.get("output", {}).get("video_fps", 12))
         write_mp4(out / VIDEO_FILE, list(imgs), fps)

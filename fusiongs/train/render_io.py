@@ -37,17 +37,31 @@ def render_linear(state: FusionState, camera, times, backend: str = "auto", batc
     """Sharp linear renders ``[T, H, W, 3]`` float32 (not clipped) at instants ``times`` (s) on the
     fitted path, or, when ``poses`` ``[T, 4, 4]`` (camera-to-world, the run's world frame) are
     given, from those poses (``times`` is then ignored)."""
-    if poses is None:
-        views = torch.as_tensor(np.asarray(times, dtype=np.float64))
-        draw = state.render
-    else:
-        views = torch.as_tensor(np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4))
-        draw = state.render_poses
-    out = []
-    for i in range(0, views.shape[0], batch):
-        lin, _, _ = draw(camera, views[i:i + batch], backend)
-        out.append(lin.float().cpu().numpy())
+    out = [lin for lin, *_ in _batches(state.render, state.render_poses, camera, times, poses, backend,
+                                       batch)]
     return np.concatenate(out) if out else np.zeros((0, camera.height, camera.width, 3), np.float32)
+
+
+@torch.no_grad()
+def render_depth_maps(state: FusionState, camera, times, backend: str = "auto", batch: int = 8,
+                      poses: np.ndarray | None = None, min_alpha: float = 0.5) -> np.ndarray:
+    """Depth along the optical axis ``[T, H, W]`` float32 (scene units) at ``times`` or from
+    ``poses`` (as :func:`render_linear`); NaN where the accumulated opacity is under ``min_alpha``
+    (nothing there to measure: :meth:`~fusiongs.train.state.FusionState.render_depth`)."""
+    out = [np.where(alpha >= min_alpha, depth, np.nan).astype(np.float32) for depth, alpha in
+           _batches(state.render_depth, state.render_depth_poses, camera, times, poses, backend, batch)]
+    return np.concatenate(out) if out else np.zeros((0, camera.height, camera.width), np.float32)
+
+
+def _batches(at_times, at_poses, camera, times, poses, backend: str, batch: int):
+    """Numpy results of ``at_times(camera, t, backend)`` over ``times``, or of ``at_poses(camera,
+    c2w, backend)`` over ``poses`` when given, ``batch`` views a call."""
+    if poses is None:
+        views, draw = torch.as_tensor(np.asarray(times, dtype=np.float64)), at_times
+    else:
+        views, draw = torch.as_tensor(np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)), at_poses
+    for i in range(0, views.shape[0], batch):
+        yield tuple(v.float().cpu().numpy() for v in draw(camera, views[i:i + batch], backend)[:2])
 
 
 def render_srgb(state: FusionState, camera, times, backend: str = "auto", batch: int = 8,

@@ -81,8 +81,12 @@ class FusionState(nn.Module):
         Returns:
             ``([T, H, W, 3] linear colours, alphas, meta)`` as :meth:`render`.
         """
-        w2c = rigid_inverse(c2w.detach().to("cpu", torch.float64))
-        return self._rasterize(camera, *self._on_device(camera, w2c), backend, True)
+        return self._rasterize(camera, *self._pose_views(camera, c2w), backend, True)
+
+    def _pose_views(self, camera: PinholeCamera, c2w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """``(viewmats, Ks)`` of camera-to-world poses ``[T, 4, 4]``, inverted on the host in float64
+        (as the trajectory's are) and copied to the Gaussians' device."""
+        return self._on_device(camera, rigid_inverse(c2w.detach().to("cpu", torch.float64)))
 
     def _rasterize(self, camera: PinholeCamera, viewmats: torch.Tensor, Ks: torch.Tensor, backend: str,
                    check_values: bool) -> tuple[torch.Tensor, torch.Tensor, RenderMeta]:
@@ -100,8 +104,17 @@ class FusionState(nn.Module):
         composite divided by the accumulated opacity is the depth along the optical axis (scene
         units) where ``alpha`` is near 1, undefined where nothing was rendered.
         """
+        return self._depth(camera, *self._views(camera, t), backend)
+
+    @torch.no_grad()
+    def render_depth_poses(self, camera: PinholeCamera, c2w: torch.Tensor, backend: str = "auto"
+                           ) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`render_depth` from camera-to-world poses ``[T, 4, 4]`` (as :meth:`render_poses`)."""
+        return self._depth(camera, *self._pose_views(camera, c2w), backend)
+
+    def _depth(self, camera: PinholeCamera, viewmats: torch.Tensor, Ks: torch.Tensor, backend: str
+               ) -> tuple[torch.Tensor, torch.Tensor]:
         m = self.model
-        viewmats, Ks = self._views(camera, t)
         z = (m.means @ viewmats[:, :3, :3].transpose(1, 2) + viewmats[:, None, :3, 3])[..., 2:]  # [T, N, 1]
         comp, alphas, _ = rasterize(m.means, m.rotations, m.scales, m.opacities, z, viewmats, Ks,
                                     camera.width, camera.height, backend=backend)

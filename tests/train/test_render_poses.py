@@ -103,3 +103,43 @@ def test_scale_renders_the_same_view_at_more_pixels(tiny_run, tmp_path, capsys):
     for bad in ("0", "-1", "9", "nan"):
         assert main(["render", str(tiny_run), "--t", "0.05", "--scale", bad, "-o", str(tmp_path / "b")]) == 2
         assert "--scale" in capsys.readouterr().err
+
+
+def test_depth_from_poses_of_a_plane_of_gaussians():
+    # Gaussians on the plane z = 3 seen from the origin, then from a camera moved back by 1 along
+    # its z axis (and one turned away, which sees nothing: NaN, not a number made up).
+    from fusiongs.camera.pinhole import PinholeCamera
+    from fusiongs.camera.trajectory import Trajectory
+    from fusiongs.losses.threshold import ContrastThreshold
+    from fusiongs.scene.gaussians import GaussianModel
+    from fusiongs.train.render_io import render_depth_maps
+    from fusiongs.train.state import FusionState
+
+    cam = PinholeCamera(width=24, height=16, fx=20.0, fy=20.0, cx=12.0, cy=8.0)
+    xy = torch.stack(torch.meshgrid(torch.linspace(-3, 3, 31), torch.linspace(-3, 3, 31), indexing="ij"), -1)
+    model = GaussianModel.from_points(torch.cat([xy.reshape(-1, 2), torch.full((961, 1), 3.0)], 1),
+                                      sh_degree=0, init_opacity=0.95)
+    traj = Trajectory(PoseSamples(t=np.array([0.0, 1.0]), c2w=np.tile(np.eye(4), (2, 1, 1))), mode="linear")
+    state = FusionState(model, traj, ContrastThreshold(), 1, False)
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[1, 2, 3] = -1.0  # moved back: the plane is 4 away
+    poses[2, :3, :3] = np.diag([-1.0, 1.0, -1.0])  # turned around (a rotation about y by pi)
+    depth = render_depth_maps(state, cam, [0, 1, 2], poses=poses)
+    assert depth.shape == (3, 16, 24) and depth.dtype == np.float32
+    for k, expect in ((0, 3.0), (1, 4.0)):
+        seen = np.isfinite(depth[k])
+        assert seen.mean() > 0.9
+        np.testing.assert_allclose(depth[k][seen], expect, rtol=1e-3)
+    assert np.isnan(depth[2]).all()
+    # the same through the trajectory at t = 0 (the identity pose)
+    np.testing.assert_allclose(render_depth_maps(state, cam, [0.0])[0], depth[0], rtol=1e-6)
+
+
+def test_the_command_writes_depth_maps_beside_the_images(tiny_run, tmp_path):
+    out = tmp_path / "d"
+    assert main(["render", str(tiny_run), "--t", "0.05", "--depth", "-o", str(out)]) == 0
+    img = read_image(next(out.glob("t_*.png")))
+    depth = np.load(next(out.glob("t_*_depth.npy")))
+    assert depth.shape == img.shape[:2] and depth.dtype == np.float32
+    seen = np.isfinite(depth)
+    assert seen.mean() > 0.5 and (depth[seen] > 0).all()
