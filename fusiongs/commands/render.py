@@ -10,7 +10,8 @@ accumulated opacity is under one half.
 
 These are the model's renders: the exposure-ratio correction of ``fusiongs deblur``'s deblurred
 frames needs the scene's frames and is not applied here (docs/method.md). An event-only run's
-exposure gain (``exposure.json``) is.
+exposure gain (``exposure.json``) is, and so is a one-frame run's colour anchor
+(``colour_anchor.json``), so that these images have the run's own colours.
 """
 
 from __future__ import annotations
@@ -67,6 +68,7 @@ def run(args: argparse.Namespace) -> int:
 
     from fusiongs.atomic import atomic_path
     from fusiongs.camera.tum import read_tum
+    from fusiongs.eval.colour_anchor import apply_anchor, read_anchor
     from fusiongs.eval.video import write_mp4
     from fusiongs.frames.image_io import write_png
     from fusiongs.train.outputs import read_exposure
@@ -78,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.scale) and 0 < args.scale <= MAX_SCALE):
         raise InputError("fusiongs render", "--scale", f"a factor in (0, {MAX_SCALE:g}]", args.scale)
     poses = read_tum(args.poses) if args.poses else None  # bad files fail before the checkpoint loads
+    anchor = read_anchor(Path(args.run))  # a one-frame run's colours, as its own renders have them
     state, camera, cfg = restore_state(Path(args.run) / "checkpoint.pt")
     if args.scale != 1.0:
         camera = camera.scaled(args.scale)
@@ -90,6 +93,7 @@ def run(args: argparse.Namespace) -> int:
     # an event-only run's gain (exposure.json), so that these match its renders
     c2w = None if poses is None else poses.c2w
     imgs = render_srgb(state, camera, times, cfg["backend"], gain=read_exposure(Path(args.run)), poses=c2w)
+    imgs = [apply_anchor(anchor, img) for img in imgs] if anchor.applied else list(imgs)
     depths = render_depth_maps(state, camera, times, cfg["backend"], poses=c2w) if args.depth else None
     for k, (t, img) in enumerate(zip(times, imgs)):
         name = f"{prefix}_{t:.6f}"
@@ -101,6 +105,6 @@ def run(args: argparse.Namespace) -> int:
             print(out / f"{name}_depth.npy")
     if args.video:
         fps = args.fps if args.fps is not None else float(cfg.get("output", {}).get("video_fps", 12))
-        write_mp4(out / VIDEO_FILE, list(imgs), fps)
+        write_mp4(out / VIDEO_FILE, imgs, fps)
         print(out / VIDEO_FILE)
     return 0

@@ -41,6 +41,7 @@ ANCHOR_NOTES = {
     NO_ANCHOR: "no frame: events fix neither absolute brightness nor per-channel gain, so raw colours "
                "are arbitrary; compare after the per-channel affine fit",
 }
+ANCHOR_FILE = "colour_anchor.json"  # a run's applied anchor, which `fusiongs render` applies too
 CLIP_LEVEL = 254.5 / 255.0  # encoded frame values at or above this are clipped (saturated)
 BLACK_LEVEL = 0.5 / 255.0   # and at or below this, clipped at black
 MIN_PIXELS = 16             # fewer unclipped pixels than this: no fit
@@ -147,6 +148,57 @@ def fit_frame_anchor(render_lin: np.ndarray, frames: np.ndarray, response: str,
         gain, offset = np.repeat(gain, 3), np.repeat(offset, 3)
     return ColourAnchor(FRAME_ANCHOR, tuple(float(v) for v in gain), tuple(float(v) for v in offset),
                         tuple(str(n) for n in names), int(valid.sum()))
+
+
+def write_anchor(run, anchor: ColourAnchor) -> None:
+    """``run/colour_anchor.json`` (:meth:`ColourAnchor.as_dict`, atomically) when ``anchor`` is
+    applied; otherwise an earlier run's file in that folder is removed."""
+    import json
+    from pathlib import Path
+
+    from fusiongs.atomic import write_text
+
+    path = Path(run) / ANCHOR_FILE
+    if anchor.applied:
+        write_text(path, json.dumps(anchor.as_dict(), indent=2) + "\n")
+    else:
+        path.unlink(missing_ok=True)
+
+
+def read_anchor(run) -> ColourAnchor:
+    """The anchor of ``run/colour_anchor.json``; :class:`ColourAnchor` () (none) without the file.
+
+    Raises:
+        InputError: naming the file and key when the file is not JSON, or its ``anchor`` is not
+            :data:`FRAME_ANCHOR`, or its ``gain`` / ``offset`` are not 3 finite numbers.
+    """
+    import json
+    from pathlib import Path
+
+    path = Path(run) / ANCHOR_FILE
+    if not path.is_file():
+        return ColourAnchor()
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise InputError(path, "(file)", "a JSON object written by fusiongs deblur", str(e)) from None
+    if not isinstance(doc, dict):
+        raise InputError(path, "(top level)", "a JSON object", type(doc).__name__)
+    if doc.get("anchor") != FRAME_ANCHOR:
+        raise InputError(path, "anchor", f'"{FRAME_ANCHOR}"', doc.get("anchor"))
+
+    def number(x) -> bool:
+        return isinstance(x, (int, float)) and not isinstance(x, bool) and bool(np.isfinite(x))
+
+    values = {}
+    for key in ("gain", "offset"):
+        v = doc.get(key)
+        if not (isinstance(v, list) and len(v) == 3 and all(number(x) for x in v)):
+            raise InputError(path, key, "3 finite numbers (one per channel, linear light)", v)
+        values[key] = tuple(float(x) for x in v)
+    frames = doc.get("frames") if isinstance(doc.get("frames"), list) else []
+    pixels = doc.get("pixels") if isinstance(doc.get("pixels"), int) else 0
+    return ColourAnchor(FRAME_ANCHOR, values["gain"], values["offset"], tuple(str(n) for n in frames), pixels)
 
 
 def apply_anchor(anchor: ColourAnchor, srgb: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from fusiongs.atomic import remove_temporaries, write_text
-from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_anchor
+from fusiongs.eval.colour_anchor import ColourAnchor, anchor_run, apply_anchor, write_anchor
 from fusiongs.eval.evaluate import compare_methods, format_table
 from fusiongs.eval.holdout import format_heldout, frame_subset, holdout_indices, parse_holdout
 from fusiongs.frames.response import linear_to_srgb
@@ -280,6 +280,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
+    write_anchor(out, anchor)  # for `fusiongs render`; an earlier run's is removed when there is none
     unanchored, images, render_only = write_outputs(
         tr, scene, out, functools.partial(apply_anchor, anchor) if anchor.applied else None,
         kept if held.size else None, (anchor.gain, anchor.offset) if anchor.applied else None)

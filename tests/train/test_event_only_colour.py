@@ -70,6 +70,13 @@ def test_one_frame_fixes_each_channels_gain_and_offset(one_frame, tmp_path, caps
         png = read_image(tmp_path / "renders" / f"{name}.png")
         gt = read_image(one_frame / "gt" / f"{name}.png")
         assert psnr(png, gt) == pytest.approx(m["views"][name]["fusiongs"]["psnr"], abs=0.05)
+    # the anchor is kept beside the outputs, and `fusiongs render` gives the run's own colours
+    kept = json.loads((tmp_path / "colour_anchor.json").read_text())
+    assert kept["gain"] == anchor["gain"] and kept["offset"] == anchor["offset"]
+    times = {r["name"]: r["t"] for r in json.loads((one_frame / "scene.json").read_text())["renders"]}
+    assert main(["render", str(tmp_path), "--t", repr(times[novel[0]]), "-o", str(tmp_path / "r")]) == 0
+    again = read_image(next((tmp_path / "r").glob("t_*.png")))
+    np.testing.assert_allclose(again, read_image(tmp_path / "renders" / f"{novel[0]}.png"), atol=1.5 / 255)
 
 
 def test_event_loss_ends_below_its_value_at_the_start_of_the_alpha_ramp(events_only, tmp_path):
@@ -145,8 +152,20 @@ def test_event_only_renders_are_exposed_by_one_gain_and_render_reuses_it(events_
     ref = np.stack([srgb_to_linear(read_image(plain / "renders" / f"{n}.png")) for n in names])
     np.testing.assert_allclose(ref, np.clip(lin, 0, 1), atol=0.01)
     # a frame fixes the level: no gain, and none left over from the event-only run in that folder
+    assert not (run / "colour_anchor.json").exists()  # no frame: nothing to anchor to
     _deblur(one_frame, run, *short)
     assert not (run / "exposure.json").exists()
+    assert (run / "colour_anchor.json").is_file()
+    # a damaged anchor file: one line naming the file and the key, exit 2
+    for bad, key in (("{not json", "(file)"), ('{"anchor": "frame", "gain": [1, 2]}', "gain"),
+                     ('{"anchor": "grey-world"}', "anchor")):
+        (run / "colour_anchor.json").write_text(bad)
+        capfd.readouterr()
+        assert main(["render", str(run), "--t", repr(times[0]), "-o", str(tmp_path / "bad")]) == 2
+        err = capfd.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"colour_anchor.json: {key}: expected" in err[0], err
+    _deblur(events_only, run, *short)  # an event-only run in the same folder removes it
+    assert not (run / "colour_anchor.json").exists()
     from fusiongs.errors import ConfigError
     from fusiongs.train.settings import OutputSettings
 
