@@ -24,6 +24,7 @@ from fusiongs.errors import InputError
 
 HELP = "render sharp images at given instants (seconds) or camera poses from a finished deblur run"
 VIDEO_FILE = "renders.mp4"
+BATCH = 8  # views rendered, written and let go at a time (a long path does not fill the memory)
 MAX_SCALE = 8.0  # --scale beyond this is a typo more likely than a wish (64x the pixels)
 
 
@@ -64,15 +65,10 @@ def check_instants(times: Sequence[float], t_min: float, t_max: float, where: st
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    import numpy as np
-
-    from fusiongs.atomic import atomic_path
     from fusiongs.camera.tum import read_tum
-    from fusiongs.eval.colour_anchor import apply_anchor, read_anchor
+    from fusiongs.eval.colour_anchor import read_anchor
     from fusiongs.eval.video import write_mp4
-    from fusiongs.frames.image_io import write_png
     from fusiongs.train.outputs import read_exposure
-    from fusiongs.train.render_io import render_depth_maps, render_srgb
     from fusiongs.train.restore import restore_state
 
     if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
@@ -91,20 +87,46 @@ def run(args: argparse.Namespace) -> int:
         times, prefix, default = list(poses.t), "pose", "renders_poses"
     out = Path(args.out) if args.out else Path(args.run) / default
     # an event-only run's gain (exposure.json), so that these match its renders
-    c2w = None if poses is None else poses.c2w
-    imgs = render_srgb(state, camera, times, cfg["backend"], gain=read_exposure(Path(args.run)), poses=c2w)
-    imgs = [apply_anchor(anchor, img) for img in imgs] if anchor.applied else list(imgs)
-    depths = render_depth_maps(state, camera, times, cfg["backend"], poses=c2w) if args.depth else None
-    for k, (t, img) in enumerate(zip(times, imgs)):
-        name = f"{prefix}_{t:.6f}"
-        write_png(out / f"{name}.png", img)
-        print(out / f"{name}.png")
-        if depths is not None:
-            with atomic_path(out / f"{name}_depth.npy") as tmp:
-                np.save(tmp, depths[k])
-            print(out / f"{name}_depth.npy")
+    frames = write_views(state, camera, cfg["backend"], times, None if poses is None else poses.c2w, out,
+                         prefix, read_exposure(Path(args.run)), anchor, args.depth, args.video)
     if args.video:
         fps = args.fps if args.fps is not None else float(cfg.get("output", {}).get("video_fps", 12))
-        write_mp4(out / VIDEO_FILE, imgs, fps)
+        write_mp4(out / VIDEO_FILE, frames, fps)
         print(out / VIDEO_FILE)
     return 0
+
+
+def write_views(state, camera, backend: str, times: list[float], c2w, out, prefix: str, gain: float,
+                anchor, depth: bool, keep: bool) -> list:
+    """Render and write ``out/<prefix>_<t>.png`` for every instant of ``times`` (or every pose of
+    ``c2w`` ``[T, 4, 4]``, ``times`` then only naming them), :data:`BATCH` views at a time: times the
+    exposure ``gain``, the colour ``anchor`` applied, with ``<name>_depth.npy`` when ``depth``.
+
+    Returns:
+        with ``keep``, the images as ``[H, W, 3]`` uint8 in order (for a video); else ``[]``.
+    """
+    import numpy as np
+
+    from fusiongs.atomic import atomic_path
+    from fusiongs.eval.colour_anchor import apply_anchor
+    from fusiongs.frames.image_io import write_png
+    from fusiongs.train.render_io import render_depth_maps, render_srgb
+
+    frames = []
+    for lo in range(0, len(times), BATCH):
+        part = slice(lo, lo + BATCH)
+        views = {"poses": None if c2w is None else c2w[part]}
+        imgs = render_srgb(state, camera, times[part], backend, gain=gain, **views)
+        depths = render_depth_maps(state, camera, times[part], backend, **views) if depth else None
+        for k, (t, img) in enumerate(zip(times[part], imgs)):
+            img = apply_anchor(anchor, img) if anchor.applied else img
+            name = f"{prefix}_{t:.6f}"
+            write_png(out / f"{name}.png", img)
+            print(out / f"{name}.png")
+            if depths is not None:
+                with atomic_path(out / f"{name}_depth.npy") as tmp:
+                    np.save(tmp, depths[k])
+                print(out / f"{name}_depth.npy")
+            if keep:
+                frames.append(np.round(np.clip(img, 0, 1) * 255).astype(np.uint8))
+    return frames
