@@ -101,6 +101,7 @@ from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresh
 from fusiongs.frames.frameset import FrameSet
 
 PIXEL_MODELS = ("auto", "step", "reset")  # CalibrateOptions.pixel_model
+RATIO_SOURCES = ("round_trip", "iv")  # CalibrateOptions.ratio
 
 @dataclass(frozen=True)
 class CalibrateOptions:
@@ -168,6 +169,18 @@ class CalibrateOptions:
             uncertainty widened to that distance before pooling (0: never); see
             :func:`discrepant_channels`. 2 was chosen on tuning seeds (session 21).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
+        ratio: where the ON/OFF ratio comes from with ``units="iv"``: ``"iv"`` (the IV fit's own
+            ratio, the default) or ``"round_trip"`` (the pixel pairs that came back to their log
+            intensity through many events, :func:`fusiongs.eval.calibrate_fit.with_round_trip_ratio`;
+            the IV fit's common scale is kept). Round trips put 3 of the 73 tuning scenes of
+            session 46 outside 10 % against 8, but on 12 fresh test scenes (1192-1203) 1 against 0
+            (mean of the per-scene largest errors 5.3 % against 5.0 %), so the default stays the IV
+            fit's (RESULTS.md, session 49).
+        round_trip_tol: largest EDI log change of a round trip.
+        round_trip_min_events: fewest events (both polarities together) in a round trip.
+        round_trip_min_pairs: fewest round trips for their ratio to be used (else the IV fit's).
+        round_trip_max_gap: frame pairs up to this far apart are searched for round trips (the IV
+            fit keeps ``max_gap``).
         iv_offsets: fit the two indicator offsets in the IV model
             (:func:`fusiongs.eval.calibrate_fit.iv_thresholds`).
         trim: residuals farther than this many robust standard deviations from their pair's
@@ -210,6 +223,11 @@ class CalibrateOptions:
     channel_prior: float = 0.05
     channel_outlier: float = 2.0
     max_gap: int = 4
+    ratio: str = "iv"
+    round_trip_tol: float = 0.1
+    round_trip_min_events: float = 6.0
+    round_trip_min_pairs: int = 100
+    round_trip_max_gap: int = 11
     units: str = "iv"
     iv_offsets: bool = True
     trim: float = 0.0
@@ -229,6 +247,13 @@ def _unreliable(res: dict, opts: CalibrateOptions) -> bool:
         return False
     rel = [res[f"std_{k}"] / res[f"theta_{k}"] for k in ("pos", "neg")]
     return not all(np.isfinite(r) and r <= opts.refractory_max_uncertainty for r in rel)
+
+
+def _pair_gap(opts: CalibrateOptions) -> int:
+    """The longest frame baseline a channel's pair data holds: the IV fit's ``max_gap``, or the
+    round trips' ``round_trip_max_gap`` when the ratio comes from them (the fit takes its own
+    pairs out of those)."""
+    return max(opts.max_gap, opts.round_trip_max_gap) if opts.ratio == "round_trip" else opts.max_gap
 
 
 def _failed(res: dict) -> bool:
@@ -277,13 +302,13 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
     for c in range(len(names)):
         sel, frame_ok = channel_pixels(sens, sat, between, chan, hot, c, names[c], opts, rng)
         data = prepare_channel(sens, counts, between, sel, bad_pair, frame_ok, events.width, opts.tile,
-                               opts.max_gap, neigh)
+                               _pair_gap(opts), neigh)
         gate = _gate_name(opts, gap)
         if gate != "off" and int(data.valid.sum()) < opts.min_pixels:
             # Every pixel's events come closer than the gap: no refractory floor can be told from
             # the signal's own intervals, so the gate would leave nothing to fit.
             data = prepare_channel(sens, counts, between, sel, np.zeros_like(bad_pair), frame_ok,
-                                   events.width, opts.tile, opts.max_gap, neigh)
+                                   events.width, opts.tile, _pair_gap(opts), neigh)
             gate = "off (it left no pixel pairs)"
         if int(data.valid.sum()) < opts.min_pixels:
             raise InputError("calibrate", "frames", f"at least {opts.min_pixels} usable pixel pairs "
@@ -298,7 +323,7 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
             # (only at small spread, or when the fit failed: see own_gate_max_spread).
             near = {k: res.get(k) for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")}
             data = prepare_channel(sens, counts, between, sel, fast, frame_ok, events.width,
-                                   opts.tile, opts.max_gap, neigh)
+                                   opts.tile, _pair_gap(opts), neigh)
             res = search_both(data, opts, rng)
             gate = "pixel (the neighbours' gate left no measurement)"
             res["neighbour_gate_fit"] = near
@@ -307,7 +332,7 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
         sd_p.append(res["std_pos"])
         sd_n.append(res["std_neg"])
         per.append({k: res.get(k) for k in ("pixels", "residuals", "kept", "agreement", "log_units",
-                                            "count_units")}
+                                            "count_units", "round_trip")}
                    | {"refractory_gate": gate, "neighbour_gate_fit": res.get("neighbour_gate_fit")})
     agreement = [c["agreement"] for c in per if c.get("agreement") is not None
                  and np.isfinite(c["agreement"])]
@@ -331,6 +356,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         :class:`SensorThresholds` with ``channels`` ``("grey",)`` or ``("R", "G", "B")``.
     """
     opts = opts or CalibrateOptions()
+    if opts.ratio not in RATIO_SOURCES:
+        raise InputError("calibrate", "ratio", f"one of {', '.join(RATIO_SOURCES)}", repr(opts.ratio))
     _check_inputs(frames, events)
     if opts.pixel_model not in PIXEL_MODELS:
         raise InputError("calibrate", "pixel_model", f"one of {', '.join(PIXEL_MODELS)}",
@@ -411,7 +438,8 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
         tp, sp = shrink_channels(tp, wide_p, opts.channel_prior)
         tn, sn = shrink_channels(tn, wide_n, opts.channel_prior)
     return SensorThresholds(names, tp, tn, sp, sn, True,
-                            f"mEDI consistency, {opts.units} fit (ON/OFF per channel)", details)
+                            f"mEDI consistency, {opts.units} fit (ON/OFF per channel)"
+                            + (", ratio from round trips" if opts.ratio == "round_trip" else ""), details)
 
 
 def failed_channels(theta_pos: np.ndarray, theta_neg: np.ndarray, theta_range: tuple[float, float]
