@@ -462,3 +462,20 @@ def test_cli_pixel_model(grey_dir, tmp_path, capsys):
     assert doc["thresholds"]["details"]["pixel_model"] == "reset"
     with pytest.raises(SystemExit):
         main(["calibrate", str(grey_dir), "--pixel-model", "grid"])
+
+
+def test_the_reported_uncertainty_adds_the_systematic_part_to_the_bootstrap(grey_asym):
+    sc = grey_asym.scene
+    est = estimate_thresholds(sc.frames, sc.events, CalibrateOptions())
+    boot = est.details["std_bootstrap"]
+    assert est.details["systematic"] == 0.04
+    for th, sd, b in ((est.theta_pos, est.std_pos, boot["std_pos"]),
+                      (est.theta_neg, est.std_neg, boot["std_neg"])):
+        np.testing.assert_allclose(sd, np.hypot(b, 0.04 * th))
+        assert (sd > np.asarray(b)).all()
+    bare = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(systematic=0.0))
+    np.testing.assert_allclose(bare.std_pos, boot["std_pos"])  # the bootstrap alone, as before
+    np.testing.assert_allclose(bare.theta_pos, est.theta_pos)  # the estimate itself is untouched
+    for bad in (-0.01, float("nan"), "0.04", True):
+        with pytest.raises(InputError, match="systematic"):
+            estimate_thresholds(sc.frames, sc.events, CalibrateOptions(systematic=bad))
