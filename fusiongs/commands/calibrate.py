@@ -22,10 +22,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "(the reference level keeps every crossing: fast pixels gated only), or "
                              "auto: reset when the frames' coefficient on the crossings it adds "
                              "exceeds 0.5 (step without frames; default)")
-    parser.add_argument("--ratio", choices=("iv", "round_trip"), default="iv",
-                        help="ON/OFF ratio from the IV fit (default) or from the pixels' round trips "
-                             "(frame pairs where a pixel came back through many events; the IV fit's "
-                             "scale kept): benchmarks/RESULTS.md, session 49")
+    parser.add_argument("--ratio", choices=("iv", "round_trip", "auto"), default=None,
+                        help="ON/OFF ratio from the IV fit, from the pixels' round trips (frame pairs "
+                             "where a pixel came back through many events; the IV fit's scale kept), or "
+                             "auto: the round trips' where the two differ by more than 5 %% "
+                             "(default: the library's, CalibrateOptions.ratio; RESULTS.md, session 49)")
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
@@ -51,7 +52,9 @@ def run(args: argparse.Namespace) -> int:
     from fusiongs.events.thresholds import calibration_document, write_calibration
     from fusiongs.io.scene_io import load_scene
 
-    opts = CalibrateOptions(seed=args.seed, pixel_model=args.pixel_model, ratio=args.ratio)
+    opts = CalibrateOptions(seed=args.seed, pixel_model=args.pixel_model)
+    if args.ratio is not None:
+        opts = dataclasses.replace(opts, ratio=args.ratio)
     if args.samples is not None:
         if args.samples < 2:
             raise InputError("command line", "--samples", "an integer >= 2", args.samples)

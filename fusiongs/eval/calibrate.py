@@ -101,7 +101,7 @@ from fusiongs.events.thresholds import GREY_CHANNELS, RGB_CHANNELS, SensorThresh
 from fusiongs.frames.frameset import FrameSet
 
 PIXEL_MODELS = ("auto", "step", "reset")  # CalibrateOptions.pixel_model
-RATIO_SOURCES = ("round_trip", "iv")  # CalibrateOptions.ratio
+RATIO_SOURCES = ("iv", "round_trip", "auto")  # CalibrateOptions.ratio
 
 @dataclass(frozen=True)
 class CalibrateOptions:
@@ -170,12 +170,15 @@ class CalibrateOptions:
             :func:`discrepant_channels`. 2 was chosen on tuning seeds (session 21).
         max_gap: frames compared: every pair ``(i, j)`` with ``j - i <= max_gap``.
         ratio: where the ON/OFF ratio comes from with ``units="iv"``: ``"iv"`` (the IV fit's own
-            ratio, the default) or ``"round_trip"`` (the pixel pairs that came back to their log
+            ratio, the default), ``"round_trip"`` (the pixel pairs that came back to their log
             intensity through many events, :func:`fusiongs.eval.calibrate_fit.with_round_trip_ratio`;
-            the IV fit's common scale is kept). Round trips put 3 of the 73 tuning scenes of
-            session 46 outside 10 % against 8, but on 12 fresh test scenes (1192-1203) 1 against 0
-            (mean of the per-scene largest errors 5.3 % against 5.0 %), so the default stays the IV
-            fit's (RESULTS.md, session 49).
+            the IV fit's common scale is kept), or ``"auto"`` (the round trips' only where it
+            differs from the fit's by more than ``ratio_switch``). Both put 3 of the 73 tuning
+            scenes of session 46 outside 10 % against 8, but on fresh test scenes they did worse:
+            round trips 1 / 12 against 0 / 12 (1192-1203), auto 2 / 12 against 1 / 12
+            (1204-1215). So the default stays the IV fit's (RESULTS.md, session 49).
+        ratio_switch: with ``ratio="auto"`` the round trips' ratio replaces the fit's only where
+            the two differ by more than this (in log ratio); elsewhere the fit's is kept.
         systematic: relative one-sigma uncertainty added in quadrature to each estimate's
             bootstrap standard deviation when frames fix the scale. The tile bootstrap alone
             covered the truth within one / two standard deviations for 33 / 54 % of the 290
@@ -231,6 +234,7 @@ class CalibrateOptions:
     channel_outlier: float = 2.0
     max_gap: int = 4
     ratio: str = "iv"
+    ratio_switch: float = 0.05
     systematic: float = 0.04
     round_trip_tol: float = 0.1
     round_trip_min_events: float = 6.0
@@ -261,7 +265,7 @@ def _pair_gap(opts: CalibrateOptions) -> int:
     """The longest frame baseline a channel's pair data holds: the IV fit's ``max_gap``, or the
     round trips' ``round_trip_max_gap`` when the ratio comes from them (the fit takes its own
     pairs out of those)."""
-    return max(opts.max_gap, opts.round_trip_max_gap) if opts.ratio == "round_trip" else opts.max_gap
+    return max(opts.max_gap, opts.round_trip_max_gap) if opts.ratio != "iv" else opts.max_gap
 
 
 def _failed(res: dict) -> bool:
@@ -366,6 +370,9 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     opts = opts or CalibrateOptions()
     if opts.ratio not in RATIO_SOURCES:
         raise InputError("calibrate", "ratio", f"one of {', '.join(RATIO_SOURCES)}", repr(opts.ratio))
+    sw = opts.ratio_switch
+    if isinstance(sw, bool) or not isinstance(sw, int | float) or not (np.isfinite(sw) and sw >= 0):
+        raise InputError("calibrate", "ratio_switch", "a finite number >= 0", repr(sw))
     sysu = opts.systematic
     if isinstance(sysu, bool) or not isinstance(sysu, int | float) or not (np.isfinite(sysu) and sysu >= 0):
         raise InputError("calibrate", "systematic", "a finite number >= 0", repr(sysu))
@@ -455,7 +462,9 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
               for sd, th in ((sp, tp), (sn, tn)))
     return SensorThresholds(names, tp, tn, sp, sn, True,
                             f"mEDI consistency, {opts.units} fit (ON/OFF per channel)"
-                            + (", ratio from round trips" if opts.ratio == "round_trip" else ""), details)
+                            + {"iv": "", "round_trip": ", ratio from round trips",
+                               "auto": ", ratio from round trips where they disagree"}[opts.ratio],
+                            details)
 
 
 def failed_channels(theta_pos: np.ndarray, theta_neg: np.ndarray, theta_range: tuple[float, float]

@@ -125,7 +125,7 @@ def search_both(data: PairData, opts: CalibrateOptions, rng: np.random.Generator
         res.update({"pixels": start["pixels"], "residuals": start["residuals"],
                     "log_units": {k: start[k] for k in ("theta_pos", "theta_neg", "std_pos", "std_neg")},
                     "count_units": None})
-        if opts.ratio == "round_trip" and not res.get("iv", "").startswith("failed"):
+        if opts.ratio in ("round_trip", "auto") and not res.get("iv", "").startswith("failed"):
             res = with_round_trip_ratio(res, data, opts, rng)
         return res
     runs = {}
@@ -205,6 +205,9 @@ def with_round_trip_ratio(res: dict, data: PairData, opts: CalibrateOptions,
         boot = boot[torch.isfinite(boot) & (boot > 0)]
         if boot.numel() > 2:
             info["std_log_ratio"] = float(boot.log().std())
+    if opts.ratio == "auto" and abs(np.log(ratio * tp / tn)) <= opts.ratio_switch:
+        info["used"] = False  # the two measures agree: the fit's own ratio is kept
+        return res | {"round_trip": info}
     info["used"] = True
     x = float(np.sqrt(ratio))
     return res | {"theta_pos": scale / x, "theta_neg": scale * x, "round_trip": info}

@@ -109,3 +109,19 @@ def test_calibrate_with_round_trips_records_them_and_keeps_the_fits_scale(tmp_pa
     assert ratios[0] != pytest.approx(ratios[1], rel=1e-4)  # the round trips' ratio was used
     with pytest.raises(SystemExit):
         main(["calibrate", str(tmp_path / "scene"), "--ratio", "balance"])
+
+
+def test_auto_takes_the_round_trips_ratio_only_where_the_two_disagree():
+    data = ideal_pairs(0.2, 0.35)
+    scale = np.sqrt(0.2 * 0.35)
+    rng = np.random.default_rng(0)
+    opts = CalibrateOptions(ratio="auto")
+    far = {"theta_pos": scale / 1.25, "theta_neg": scale * 1.25}  # 56 % off: replaced
+    out = with_round_trip_ratio(far, data, opts, rng)
+    assert out["round_trip"]["used"]
+    assert out["theta_neg"] / out["theta_pos"] == pytest.approx(0.35 / 0.2, rel=0.05)
+    near = {"theta_pos": 0.2 * 1.01, "theta_neg": 0.35 / 1.01}  # 2 % off: within the switch, kept
+    out = with_round_trip_ratio(near, data, opts, rng)
+    assert not out["round_trip"]["used"] and (out["theta_pos"], out["theta_neg"]) == (0.2 * 1.01, 0.35 / 1.01)
+    with pytest.raises(InputError, match="ratio_switch"):
+        estimate_thresholds(None, None, CalibrateOptions(ratio="auto", ratio_switch=-1.0))
