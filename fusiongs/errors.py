@@ -6,7 +6,14 @@ Every error a user can trigger with a file, a config key or a command-line value
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
+
+
+def is_finite_number(value: object) -> bool:
+    """Whether ``value`` is a finite ``int`` or ``float`` and not a ``bool`` (JSON's ``true`` is no
+    number): the test every option and file field that must hold a real number goes through."""
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 class FusionGSError(Exception):

@@ -75,7 +75,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusiongs.errors import InputError
+from fusiongs.errors import InputError, is_finite_number
 from fusiongs.eval.calibrate_data import (
     channel_pixels,
     count_inputs,
@@ -370,22 +370,20 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     opts = opts or CalibrateOptions()
     if opts.ratio not in RATIO_SOURCES:
         raise InputError("calibrate", "ratio", f"one of {', '.join(RATIO_SOURCES)}", repr(opts.ratio))
-    sw = opts.ratio_switch
-    if isinstance(sw, bool) or not isinstance(sw, int | float) or not (np.isfinite(sw) and sw >= 0):
-        raise InputError("calibrate", "ratio_switch", "a finite number >= 0", repr(sw))
-    sysu = opts.systematic
-    if isinstance(sysu, bool) or not isinstance(sysu, int | float) or not (np.isfinite(sysu) and sysu >= 0):
-        raise InputError("calibrate", "systematic", "a finite number >= 0", repr(sysu))
+    for name in ("ratio_switch", "systematic"):
+        v = getattr(opts, name)
+        if not (is_finite_number(v) and v >= 0):
+            raise InputError("calibrate", name, "a finite number >= 0", repr(v))
     _check_inputs(frames, events)
     if opts.pixel_model not in PIXEL_MODELS:
         raise InputError("calibrate", "pixel_model", f"one of {', '.join(PIXEL_MODELS)}",
                          repr(opts.pixel_model))
     cut = opts.excess_cut
-    if isinstance(cut, bool) or not isinstance(cut, int | float) or not np.isfinite(cut):
+    if not is_finite_number(cut):
         raise InputError("calibrate", "excess_cut", "a finite number", repr(cut))
     top = opts.excess_max
-    if (isinstance(top, bool) or not isinstance(top, int | float) or not np.isfinite(top)
-            or not top > cut):  # finite: it is written to calibration.json, which is strict JSON
+    # finite: it is written to calibration.json, which is strict JSON
+    if not (is_finite_number(top) and top > cut):
         raise InputError("calibrate", "excess_max", f"a finite number above excess_cut ({cut})",
                          repr(top))
     if not isinstance(opts.reset_burst_end, bool):

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fusiongs.errors import InputError
+from fusiongs.errors import InputError, is_finite_number
 from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
 
 #: The anchors a run's report can name.
@@ -187,13 +187,10 @@ def read_anchor(run) -> ColourAnchor:
     if doc.get("anchor") != FRAME_ANCHOR:
         raise InputError(path, "anchor", f'"{FRAME_ANCHOR}"', doc.get("anchor"))
 
-    def number(x) -> bool:
-        return isinstance(x, (int, float)) and not isinstance(x, bool) and bool(np.isfinite(x))
-
     values = {}
     for key in ("gain", "offset"):
         v = doc.get(key)
-        if not (isinstance(v, list) and len(v) == 3 and all(number(x) for x in v)):
+        if not (isinstance(v, list) and len(v) == 3 and all(is_finite_number(x) for x in v)):
             raise InputError(path, key, "3 finite numbers (one per channel, linear light)", v)
         values[key] = tuple(float(x) for x in v)
     frames = doc.get("frames") if isinstance(doc.get("frames"), list) else []

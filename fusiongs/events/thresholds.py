@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from fusiongs.atomic import json_ready
-from fusiongs.errors import InputError
+from fusiongs.errors import InputError, is_finite_number
 
 GREY_CHANNELS = ("grey",)
 RGB_CHANNELS = ("R", "G", "B")
@@ -171,7 +171,7 @@ def detail_number(thresholds: SensorThresholds, key: str) -> float | None:
     """``thresholds.details[key]`` as a float when it is a finite number (not a bool), else None
     (a calibration.json may come from elsewhere)."""
     v = thresholds.details.get(key)
-    if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
+    if not is_finite_number(v):
         return None
     return float(v)
 

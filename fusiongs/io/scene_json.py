@@ -7,11 +7,10 @@ Files named by the document are not touched here (see :mod:`fusiongs.io.scene_io
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 from fusiongs.camera.pinhole import PinholeCamera, SceneCamera, UncalibratedCamera
-from fusiongs.errors import InputError
+from fusiongs.errors import InputError, is_finite_number
 from fusiongs.events.stream import CFA_PATTERNS
 from fusiongs.frames.response import parse_response
 from fusiongs.io.scene import RenderRequest
@@ -42,15 +41,11 @@ class SceneSpec:
     renders: tuple[RenderRequest, ...] = field(default_factory=tuple)
 
 
-def _is_number(v: object) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-
-
 def _number(d: dict, key: str, where: str, path: str) -> float:
     if key not in d:
         raise InputError(where, f"{path}{key}", "a finite number (required key missing)")
     v = d[key]
-    if not _is_number(v):
+    if not is_finite_number(v):
         raise InputError(where, f"{path}{key}", "a finite number", repr(v))
     return float(v)
 
@@ -98,7 +93,7 @@ def _camera(d: dict, where: str) -> SceneCamera:
     vals = _intrinsics(c, where)
     dist = c.get("distortion")
     if dist is not None:
-        if not isinstance(dist, list) or len(dist) != 5 or not all(_is_number(v) for v in dist):
+        if not isinstance(dist, list) or len(dist) != 5 or not all(is_finite_number(v) for v in dist):
             raise InputError(where, "camera.distortion", "5 finite numbers [k1, k2, p1, p2, k3]",
                              repr(dist))
         dist = tuple(float(v) for v in dist)
