@@ -62,6 +62,22 @@ def check_instants(times: Sequence[float], t_min: float, t_max: float, where: st
                              f"[{t_min:.6g}, {t_max:.6g}] s", f"{t:g}")
 
 
+def check_distinct_names(times: Sequence[float], where: str) -> None:
+    """Raise unless distinct instants get distinct image names (``{t:.6f}``): two poses a tenth of a
+    microsecond apart would otherwise write one file over the other.
+
+    Raises:
+        InputError: naming ``where`` and the first two instants that share a name.
+    """
+    seen: dict[str, float] = {}
+    for t in times:
+        name = f"{t:.6f}"
+        if name in seen and seen[name] != t:
+            raise InputError(where, "t", "times that differ within 6 decimals (they name the images)",
+                             f"{seen[name]!r} and {t!r}")
+        seen[name] = t
+
+
 def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -85,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
         times, prefix, default = list(args.t), "t", "renders_t"
     else:
         times, prefix, default = list(poses.t), "pose", "renders_poses"
+    check_distinct_names(times, "--t" if poses is None else args.poses)
     out = Path(args.out) if args.out else Path(args.run) / default
     # an event-only run's gain (exposure.json), so that these match its renders
     frames = write_views(state, camera, cfg["backend"], times, None if poses is None else poses.c2w, out,

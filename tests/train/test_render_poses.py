@@ -143,3 +143,15 @@ def test_the_command_writes_depth_maps_beside_the_images(tiny_run, tmp_path):
     assert depth.shape == img.shape[:2] and depth.dtype == np.float32
     seen = np.isfinite(depth)
     assert seen.mean() > 0.5 and (depth[seen] > 0).all()
+
+
+def test_poses_whose_times_name_the_same_image_are_refused(tiny_run, tmp_path, capsys):
+    fitted = read_tum(tiny_run / "trajectory.txt")
+    path = tmp_path / "poses.txt"
+    write_tum(path, PoseSamples(np.array([0.1, 0.1000001]), fitted.c2w[:2]))
+    assert main(["render", str(tiny_run), "--poses", str(path), "-o", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "poses.txt: t: expected times that differ within 6 decimals" in err[0], err
+    assert not (tmp_path / "o").exists()
+    # the same instant twice is the same image, as before
+    assert main(["render", str(tiny_run), "--t", "0.05", "0.05", "-o", str(tmp_path / "same")]) == 0
