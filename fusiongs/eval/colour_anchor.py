@@ -156,11 +156,11 @@ def write_anchor(run, anchor: ColourAnchor) -> None:
     import json
     from pathlib import Path
 
-    from fusiongs.atomic import write_text
+    from fusiongs.atomic import json_ready, write_text
 
     path = Path(run) / ANCHOR_FILE
-    if anchor.applied:
-        write_text(path, json.dumps(anchor.as_dict(), indent=2) + "\n")
+    if anchor.applied:  # strict JSON (a non-finite value as null), as every file fusiongs writes
+        write_text(path, json.dumps(json_ready(anchor.as_dict()), indent=2, allow_nan=False) + "\n")
     else:
         path.unlink(missing_ok=True)
 
