@@ -68,9 +68,10 @@ frame does not make it observable either: the EDI sharpness criterion of one fra
 sweep's scenes and picked the largest candidate on 13 of 16 tuning scenes (1.5-5.3x the truth;
 benchmarks/RESULTS.md, session 16), so one frame is treated as none for the scale.
 
-Known errors: on the simulator's test sweeps about one scene in 12 to 25 still has an estimate
-more than 10 % off. Three causes are known: the reference level's lag (depth and gallery scenes
-read +2..+5 %), the refractory gate keeping only slow pixel pairs (long-dead-time walls read low),
+Known errors: 4 of the 36 fresh test scenes of sessions 49-50 have an estimate more than 10 % off,
+3 of them sensors with thresholds near 0.1 and dead times near 0.8 ms, where the refractory gate
+leaves almost nothing. Three causes are known: the reference level's lag (depth and gallery
+scenes read +2..+5 %), the gate keeping only slow pixel pairs (long-dead-time walls read low),
 and the pixel's own gate in dark colour scenes. benchmarks/RESULTS.md ("Where the estimator's
 remaining errors come from") lists them with every remedy measured and refuted so far; look there
 before trying one.
