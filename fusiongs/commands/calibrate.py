@@ -101,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
     gates = [c.get("refractory_gate") for c in th.details.get("per_channel", [])]
     if any(g and g != "neighbours" and g != "off" for g in gates):
         print("refractory gate per channel: " + ", ".join(f"{n} {g}" for n, g in zip(th.channels, gates)))
+    for warning in th.details.get("warnings", []):
+        print(f"warning: {warning}", file=sys.stderr)
     if not th.scale_known:
         why = ("the frames' consistency fit failed on every channel"
                if th.details.get("consistency_fit") else "fewer than two frames")

@@ -377,11 +377,14 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
 
     opts = CalibrateOptions(unknown_scale=cfg.threshold.init)
     try:
-        return estimate_thresholds(scene.frames, scene.events, opts).for_sensor(cfa)
+        theta = estimate_thresholds(scene.frames, scene.events, opts)
     except InputError as e:  # too little data to measure: say so, start from threshold.init
         print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
               f"{cfg.threshold.init}", file=sys.stderr)
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
+    for warning in theta.details.get("warnings", []):
+        print(f"fusiongs: calibration warning: {warning}", file=sys.stderr)
+    return theta.for_sensor(cfa)
 
 
 def auto_exposure(cfg: DeblurConfig, n_frames: int) -> bool:

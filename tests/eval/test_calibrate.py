@@ -479,3 +479,41 @@ def test_the_reported_uncertainty_adds_the_systematic_part_to_the_bootstrap(grey
     for bad in (-0.01, float("nan"), "0.04", True):
         with pytest.raises(InputError, match="systematic"):
             estimate_thresholds(sc.frames, sc.events, CalibrateOptions(systematic=bad))
+
+
+def test_a_gate_that_fell_back_widens_the_uncertainty_and_warns(grey_asym):
+    sc = grey_asym.scene
+    base = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(bootstrap=50))
+    assert not base.details["per_channel"][0]["gate_fallback"] and "warnings" not in base.details
+    # No fit meets this uncertainty: the channel falls back to the pixel's own gate (see above).
+    own = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
+        bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0))
+    assert own.details["per_channel"][0]["gate_fallback"]
+    assert own.details["systematic"] == 0.12
+    boot = own.details["std_bootstrap"]
+    np.testing.assert_allclose(own.std_pos, np.hypot(boot["std_pos"], 0.12 * own.theta_pos))
+    np.testing.assert_allclose(own.std_neg, np.hypot(boot["std_neg"], 0.12 * own.theta_neg))
+    (warning,) = own.details["warnings"]
+    assert "channel(s) grey" in warning and "12 %" in warning
+    # the uncertain neighbours' fit kept as it is counts as a fallback too, with its estimate untouched
+    kept = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
+        bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=0.5, systematic_fallback=0.2))
+    assert kept.details["per_channel"][0]["gate_fallback"] and kept.details["systematic"] == 0.2
+    np.testing.assert_allclose(kept.theta_pos, base.theta_pos)
+    for bad in (-0.01, float("nan"), None):
+        with pytest.raises(InputError, match="systematic_fallback"):
+            estimate_thresholds(sc.frames, sc.events, CalibrateOptions(systematic_fallback=bad))
+
+
+def test_cli_prints_the_calibration_warnings(grey_dir, tmp_path, capsys, monkeypatch):
+    import fusiongs.eval.calibrate as cal
+
+    real = cal.estimate_thresholds
+    forced = CalibrateOptions(bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0)
+    monkeypatch.setattr(cal, "estimate_thresholds",
+                        lambda frames, events, opts=None: real(frames, events, forced))
+    assert main(["calibrate", str(grey_dir), "-o", str(tmp_path / "w.json")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("warning: the refractory gate left too few pixel pairs") and err.count("\n") == 1
+    doc = json.loads((tmp_path / "w.json").read_text())
+    assert doc["thresholds"]["details"]["warnings"] == [err[len("warning: "):].rstrip("\n")]
