@@ -228,6 +228,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     psnr_now = None  # running mean of the blurry-frame PSNR (re-rendered input), on the device
     if ckpt is None:
         opts = _optimizers(state, cfg, extent, colour_scale)
+        # said once, when the run starts (a resumed run's calibration.json carries them)
+        for warning in theta0.details.get("warnings", []):
+            print(f"fusiongs: calibration warning: {warning}", file=sys.stderr)
     else:
         with checkpoint_errors(ckpt_path):  # a foreign or edited checkpoint: one line, not a trace
             _restore(ckpt, state)
@@ -382,8 +385,6 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
         print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
               f"{cfg.threshold.init}", file=sys.stderr)
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
-    for warning in theta.details.get("warnings", []):
-        print(f"fusiongs: calibration warning: {warning}", file=sys.stderr)
     return theta.for_sensor(cfa)
 
 

@@ -3,6 +3,7 @@ file is one named error (also through ``fusiongs deblur --resume``)."""
 
 from __future__ import annotations
 
+import json
 import pickle
 from collections import OrderedDict
 from pathlib import Path
@@ -156,3 +157,16 @@ def test_deblur_resume_on_a_foreign_checkpoint_is_one_line(tiny_scene, tiny_run,
         ckpt["model"] = {}  # no Gaussian parameters
     save_checkpoint(tmp_path / "checkpoint.pt", ckpt)
     assert "a complete fusiongs checkpoint" in _deblur_resume(tiny_scene, tmp_path, capsys)
+
+
+def test_the_calibration_warning_is_said_once_when_a_run_starts(tiny_scene, tmp_path, capsys):
+    # the tiny scene's refractory gate leaves nothing to fit: its calibration warns (calibrate.py)
+    args = ["deblur", str(tiny_scene), "-o", str(tmp_path), "init.n_points=50", "optim.iterations=2",
+            "output.progress=false"]
+    assert main(args) == 0
+    err = capsys.readouterr().err
+    assert err.count("fusiongs: calibration warning: the refractory gate left too few pixel pairs") == 1
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    assert len(doc["thresholds"]["details"]["warnings"]) == 1
+    assert main([*args, "--resume"]) == 0  # said when the run started, not again
+    assert "calibration warning" not in capsys.readouterr().err
