@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from fusiongs.errors import InputError
     from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
     from fusiongs.eval.truth import true_thresholds
-    from fusiongs.events.thresholds import calibration_document, write_calibration
+    from fusiongs.events.thresholds import calibration_document, calibration_warnings, write_calibration
     from fusiongs.io.scene_io import load_scene
 
     opts = CalibrateOptions(seed=args.seed, pixel_model=args.pixel_model)
@@ -101,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
     gates = [c.get("refractory_gate") for c in th.details.get("per_channel", [])]
     if any(g and g != "neighbours" and g != "off" for g in gates):
         print("refractory gate per channel: " + ", ".join(f"{n} {g}" for n, g in zip(th.channels, gates)))
-    for warning in th.details.get("warnings", []):
+    for warning in calibration_warnings(th):
         print(f"warning: {warning}", file=sys.stderr)
     if not th.scale_known:
         why = ("the frames' consistency fit failed on every channel"

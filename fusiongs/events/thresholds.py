@@ -150,6 +150,7 @@ def read_calibration(path: str | Path) -> tuple[SensorThresholds, dict]:
         raise InputError(p, "thresholds", "an object with channels, theta_pos and theta_neg", "missing")
     th = SensorThresholds.from_dict(doc["thresholds"], str(p))
     reset_model_parameters(th, p)  # a reset calibration's numbers checked here, naming the file
+    calibration_warnings(th, p)
     return th, doc
 
 
@@ -174,6 +175,19 @@ def detail_number(thresholds: SensorThresholds, key: str) -> float | None:
     if not is_finite_number(v):
         return None
     return float(v)
+
+
+def calibration_warnings(thresholds: SensorThresholds, where: str | Path = "calibration") -> list[str]:
+    """The estimator's warnings (its details' ``warnings``: a list of sentences; none when absent).
+
+    Raises:
+        InputError: naming ``where``, when ``warnings`` is there but not a list of strings (a
+            calibration.json may come from elsewhere).
+    """
+    warnings = thresholds.details.get("warnings", [])
+    if not (isinstance(warnings, list) and all(isinstance(w, str) for w in warnings)):
+        raise InputError(where, "details.warnings", "a list of strings", repr(warnings))
+    return warnings
 
 
 def reset_model_parameters(thresholds: SensorThresholds, where: str | Path = "calibration"

@@ -23,7 +23,12 @@ import torch
 from fusiongs.camera.trajectory import Trajectory
 from fusiongs.camera.tum import PoseSamples
 from fusiongs.errors import ConfigError, InputError
-from fusiongs.events.thresholds import SensorThresholds, calibration_event_weights, detail_number
+from fusiongs.events.thresholds import (
+    SensorThresholds,
+    calibration_event_weights,
+    calibration_warnings,
+    detail_number,
+)
 from fusiongs.io.scene import Scene
 from fusiongs.losses.blur import exposure_instants
 from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
@@ -229,7 +234,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if ckpt is None:
         opts = _optimizers(state, cfg, extent, colour_scale)
         # said once, when the run starts (a resumed run's calibration.json carries them)
-        for warning in theta0.details.get("warnings", []):
+        for warning in calibration_warnings(theta0):
             print(f"fusiongs: calibration warning: {warning}", file=sys.stderr)
     else:
         with checkpoint_errors(ckpt_path):  # a foreign or edited checkpoint: one line, not a trace
@@ -380,12 +385,11 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
 
     opts = CalibrateOptions(unknown_scale=cfg.threshold.init)
     try:
-        theta = estimate_thresholds(scene.frames, scene.events, opts)
+        return estimate_thresholds(scene.frames, scene.events, opts).for_sensor(cfa)
     except InputError as e:  # too little data to measure: say so, start from threshold.init
         print(f"fusiongs: thresholds not estimated ({e}); starting from threshold.init = "
               f"{cfg.threshold.init}", file=sys.stderr)
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
-    return theta.for_sensor(cfa)
 
 
 def auto_exposure(cfg: DeblurConfig, n_frames: int) -> bool:

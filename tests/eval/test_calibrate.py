@@ -517,3 +517,18 @@ def test_cli_prints_the_calibration_warnings(grey_dir, tmp_path, capsys, monkeyp
     assert err.startswith("warning: the refractory gate left too few pixel pairs") and err.count("\n") == 1
     doc = json.loads((tmp_path / "w.json").read_text())
     assert doc["thresholds"]["details"]["warnings"] == [err[len("warning: "):].rstrip("\n")]
+
+
+def test_a_calibration_file_with_bad_warnings_is_one_line(grey_dir, tmp_path, capsys):
+    good = SensorThresholds.uniform(0.2, 0.25, None, "given")
+    assert read_calibration(write_calibration(tmp_path / "ok.json", good))[0].details == {}
+    for bad in (5, "check it", [1, 2]):
+        th = SensorThresholds(good.channels, good.theta_pos, good.theta_neg, good.std_pos, good.std_neg,
+                              True, "given", {"warnings": bad})
+        path = write_calibration(tmp_path / "bad.json", th)
+        with pytest.raises(InputError, match=r"bad\.json: details\.warnings"):
+            read_calibration(path)
+    code = main(["deblur", str(grey_dir), "-o", str(tmp_path / "run"), "--calibration", str(path),
+                 "optim.iterations=2", "output.progress=false"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "details.warnings" in err[0]
