@@ -76,6 +76,21 @@ def _by_view(images: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     return ours
 
 
+def threshold_summary(tr: Trained) -> dict | None:
+    """θ of the run as ``[[ON per channel], [OFF per channel]]``: where it started (the
+    calibration), at the first event iteration (after ``threshold.render_floor``) and at the end;
+    None without events."""
+    th, h = tr.initial_thresholds, tr.history
+    if th is None or tr.data.events is None or not h.theta_pos:
+        return None
+    out = {"calibration": [list(map(float, th.theta_pos)), list(map(float, th.theta_neg))]}
+    if tr.config.events.warmup in h.iteration:
+        j = h.iteration.index(tr.config.events.warmup)
+        out["events_start"] = [h.theta_pos[j], h.theta_neg[j]]
+    out["final"] = [h.theta_pos[-1], h.theta_neg[-1]]
+    return out
+
+
 def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], out: Path,
                      gt_dir: Path | None, heldout: tuple[dict, dict] | None = None,
                      anchor: ColourAnchor | None = None,
@@ -115,6 +130,9 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
         result["sharpness"] = sharp
     if heldout is not None:
         result["heldout"] = heldout[0]
+    thresholds = threshold_summary(tr)
+    if thresholds is not None:
+        result["thresholds"] = thresholds
     result["seconds"] = tr.history.seconds
     result["render_seconds"] = tr.history.render_seconds
     result["backward_seconds"] = tr.history.backward_seconds

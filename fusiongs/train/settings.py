@@ -146,10 +146,19 @@ class ThresholdSettings:
     grid: tuple[int, int] | None = None  # (gh, gw) spatial θ field over the sensor; None = scalar
     time_knots: int = 0              # knots of a slow θ drift over the recording (0 = none, else >= 2)
     smoothness: float = 1.0          # weight of the field / drift smoothness regulariser
+    # when the events start (iteration events.warmup, >= 2 frames): raise each θ to the one the
+    # renders fit to the counts, which reads low, not high (train/render_threshold.py). It mends
+    # calibrations far below the truth (RESULTS.md session 52: chosen on tuning seeds)
+    render_floor: bool = True
+    render_floor_windows: int = 32   # event windows of that fit (lengths up to one frame interval)
+    render_floor_sigma: float = 3.0  # low-pass (pixels) of renders and counts in that fit; 0 none
 
     def __post_init__(self) -> None:
+        if self.render_floor_windows < 1:
+            raise ConfigError("config", "threshold.render_floor_windows", "an integer >= 1",
+                              repr(self.render_floor_windows))
         _need_positive("threshold", self, ("init", "lr"))  # to freeze θ: threshold.learn=false
-        _need_positive("threshold", self, ("regularise", "smoothness"), zero_ok=True)
+        _need_positive("threshold", self, ("regularise", "smoothness", "render_floor_sigma"), zero_ok=True)
 
 
 @dataclass

@@ -276,6 +276,8 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             t_step = time.perf_counter()
             frame = order[it % len(order)]
             lam_ev = _event_weight(cfg, data, it)
+            if it == cfg.events.warmup and cfg.threshold.render_floor and data.n_frames:
+                _floor_thresholds(state, data, cfg)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
             res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev),
                                 device_gen=device_gen, lowpass_history=lp_history)
@@ -424,6 +426,19 @@ def reset_event_weights(data: TrainData, theta0: SensorThresholds, device: torch
     :class:`InputError`."""
     w = calibration_event_weights(data.events, theta0)
     return None if w is None else torch.from_numpy(w).to(device)
+
+
+def _floor_thresholds(state: FusionState, data: TrainData, cfg: DeblurConfig) -> None:
+    """``threshold.render_floor``: raise θ to what the renders fit to the counts; says so."""
+    from fusiongs.train.render_threshold import apply_render_floor
+
+    moved = apply_render_floor(state, data, cfg)
+    if moved is not None and not torch.equal(*moved):
+        def fmt(t: torch.Tensor) -> str:
+            return "ON " + "/".join(f"{v:.3f}" for v in t[0].tolist()) + ", OFF " + "/".join(
+                f"{v:.3f}" for v in t[1].tolist())
+        print(f"fusiongs: θ raised to the renders' floor when the events start: {fmt(moved[0])} -> "
+              f"{fmt(moved[1])}", file=sys.stderr)
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:

@@ -55,6 +55,11 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     calib = json.loads((tiny_run / "calibration.json").read_text())
     assert calib["format"] == "fusiongs-calibration" and calib["thresholds"]["channels"] == ["grey"]
     assert "novel" in metrics["mean"]
+    # θ where it started, when the events started (iteration 4) and at the end, per polarity
+    th = metrics["thresholds"]
+    assert th["calibration"] == [calib["thresholds"]["theta_pos"], calib["thresholds"]["theta_neg"]]
+    assert th["events_start"] == [rows[4]["theta_pos"], rows[4]["theta_neg"]]
+    assert th["final"] == [theta["theta_pos"], theta["theta_neg"]]
     assert read_image(tiny_run / "report.png").shape[1] > 100
     assert not list(tiny_run.rglob("*.tmp*")), "no temporary files are left behind"
 
