@@ -42,19 +42,6 @@ class RenderFloor:
     pixels: torch.Tensor
 
 
-def sample_windows(t_range: tuple[float, float], longest: float, shortest: float, n: int,
-                   gen: torch.Generator) -> list[tuple[float, float]]:
-    """``n`` windows ``(t_a, t_b)`` (s) with lengths uniform in ``[shortest, longest]`` placed
-    uniformly inside ``t_range``; drawn on the host from ``gen``."""
-    t0, t1 = t_range
-    longest = min(longest, t1 - t0)
-    shortest = min(shortest, longest)
-    u = torch.rand(n, 2, generator=gen, dtype=torch.float64, device="cpu")
-    length = shortest + u[:, 0] * (longest - shortest)
-    start = t0 + u[:, 1] * (t1 - t0 - length)
-    return [(a, a + b) for a, b in zip(start.tolist(), length.tolist())]
-
-
 def window_sums(d: torch.Tensor, n_pos: torch.Tensor, n_neg: torch.Tensor, channel: torch.Tensor,
                 keep: torch.Tensor, channels: int, sigma: float = 0.0) -> torch.Tensor:
     """Normal-equation sums of ``d ≈ θ₊ n₊ − θ₋ n₋`` per channel, optionally on low-passed maps.
@@ -107,7 +94,7 @@ def render_floor(state, data: TrainData, windows: list[tuple[float, float]], gre
     Args:
         state: a :class:`~fusiongs.train.state.FusionState` (rendered without gradients).
         data: the training data (events, CFA, censored counts).
-        windows: ``(t_a, t_b)`` seconds.
+        windows: ``(t_a, t_b)`` seconds (:func:`~fusiongs.train.schedules.sample_free_windows`).
         grey_weights, log_eps: as the event loss (``events.grey_weights``, ``events.log_eps``).
         min_pixels: fewest pixels with events of each polarity for a channel's fit.
         batch: windows rendered at once.
@@ -157,14 +144,16 @@ def apply_render_floor(state, data: TrainData, cfg) -> tuple[torch.Tensor, torch
         ``(θ before, θ after)`` as ``[2, C]`` host tensors, or None where it does not apply (no
         events, fewer than 2 frames: the renders' scale is then not the frames').
     """
+    from fusiongs.train.schedules import sample_free_windows
     from fusiongs.train.step import longest_free_window
 
     if data.events is None or data.n_frames < 2:
         return None
     gen = torch.Generator(device="cpu").manual_seed(cfg.seed)
     ev = cfg.events
-    windows = sample_windows(data.t_range, longest_free_window(cfg, data), ev.min_window,
-                             cfg.threshold.render_floor_windows, gen)
+    longest = longest_free_window(cfg, data)
+    windows = sample_free_windows(cfg.threshold.render_floor_windows, data.t_range, longest, gen,
+                                  min(ev.min_window, longest), spacing="linear").tolist()
     floor = render_floor(state, data, windows, ev.grey_weights, ev.log_eps, cfg.backend,
                          sigma=cfg.threshold.render_floor_sigma)
     log_theta = state.threshold.log_theta

@@ -7,6 +7,7 @@ random draws are made on that generator's device (the CPU without one).
 from __future__ import annotations
 
 import math
+from typing import Literal
 
 import torch
 
@@ -108,8 +109,10 @@ def sample_free_windows(
     frame_interval: float,
     generator: torch.Generator | None = None,
     min_duration: float = 1e-3,
+    spacing: Literal["log", "linear"] = "log",
 ) -> torch.Tensor:
-    """Free event windows: duration log-uniform in ``[min_duration, frame_interval]``.
+    """Free event windows: duration log-uniform in ``[min_duration, frame_interval]`` (or uniform,
+    ``spacing="linear"``).
 
     The duration is clamped to the event time range, and the start is uniform so that the window
     lies inside ``t_range``.
@@ -120,14 +123,22 @@ def sample_free_windows(
         frame_interval: longest duration in seconds (one frame interval).
         generator: random generator.
         min_duration: shortest duration in seconds (1 ms).
+        spacing: ``"log"`` (the training's windows: short ones as often as long ones per octave)
+            or ``"linear"`` (durations uniform; the threshold fit of ``train/render_threshold.py``).
 
     Returns:
         ``[n, 2]`` float64 ``(t_a, t_b)`` in seconds, ``t0 <= t_a < t_b <= t1``, on the
         generator's device.
     """
     t0, t1 = _check_windows("sample_free_windows", t_range, frame_interval, min_duration)
+    if spacing not in ("log", "linear"):
+        raise InputError("sample_free_windows", "spacing", "'log' or 'linear'", repr(spacing))
     u = torch.rand(n, 2, generator=generator, dtype=torch.float64, device=_device(generator))
-    dur = _log_uniform(u[:, 0], min_duration, frame_interval).clamp(max=t1 - t0)
+    if spacing == "log":
+        dur = _log_uniform(u[:, 0], min_duration, frame_interval)
+    else:
+        dur = min_duration + u[:, 0] * (frame_interval - min_duration)
+    dur = dur.clamp(max=t1 - t0)
     start = t0 + u[:, 1] * (t1 - t0 - dur)
     return torch.stack((start, start + dur), -1)
 

@@ -276,7 +276,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             t_step = time.perf_counter()
             frame = order[it % len(order)]
             lam_ev = _event_weight(cfg, data, it)
-            if it == cfg.events.warmup and cfg.threshold.render_floor and data.n_frames:
+            if it == cfg.events.warmup and cfg.threshold.render_floor:
                 _floor_thresholds(state, data, cfg)
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
             res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev),

@@ -8,6 +8,7 @@ import pytest
 import torch
 
 from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.errors import InputError
 from fusiongs.events.stream import EventStream
 from fusiongs.losses.colour import cfa_index
 from fusiongs.train.data import TrainData, event_indices
@@ -15,10 +16,10 @@ from fusiongs.train.render_threshold import (
     RenderFloor,
     raise_to_render_floor,
     render_floor,
-    sample_windows,
     solve_floor,
     window_sums,
 )
+from fusiongs.train.schedules import sample_free_windows
 
 CPU = torch.device("cpu")
 H, W, EPS = 24, 32, 1e-3
@@ -75,7 +76,7 @@ def ramps():
 
 
 def _windows(n: int = 16) -> list[tuple[float, float]]:
-    return sample_windows((0.0, 1.0), 0.5, 0.05, n, torch.Generator().manual_seed(1))
+    return sample_free_windows(n, (0.0, 1.0), 0.5, torch.Generator().manual_seed(1), 0.05, "linear").tolist()
 
 
 @pytest.mark.parametrize("sigma", [0.0, 2.0])
@@ -174,10 +175,14 @@ def test_too_few_pixels_or_a_negative_fit_leave_theta_unchanged():
 
 
 def test_windows_lie_inside_the_range_with_lengths_in_bounds():
-    w = np.array(sample_windows((2.0, 3.0), 0.4, 0.1, 200, torch.Generator().manual_seed(0)))
+    """The fit's windows: the training's sampler with durations uniform, not log-uniform."""
+    w = sample_free_windows(200, (2.0, 3.0), 0.4, torch.Generator().manual_seed(0), 0.1, "linear").numpy()
     length = w[:, 1] - w[:, 0]
     assert (w[:, 0] >= 2.0).all() and (w[:, 1] <= 3.0 + 1e-12).all()
     assert length.min() >= 0.1 - 1e-12 and length.max() <= 0.4 + 1e-12 and length.std() > 0.05
+    assert abs(length.mean() - 0.25) < 0.02  # log-uniform would give 0.3 / ln 4 = 0.216
+    with pytest.raises(InputError, match="spacing"):
+        sample_free_windows(2, (2.0, 3.0), 0.4, None, 0.1, "cubic")
 
 
 @pytest.mark.parametrize("floor", [True, False])
