@@ -30,6 +30,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
+    parser.add_argument("--refine", action="store_true",
+                        help="then run deblur's frames-only warm-up (--config and key=value as deblur's) "
+                             "and raise each threshold to what its renders fit to the event counts, as "
+                             "deblur does when its events start (threshold.render_floor): minutes "
+                             "instead of seconds; mends estimates that read low, never lowers one "
+                             "(RESULTS.md, session 53)")
+    parser.add_argument("--config", default=None,
+                        help="with --refine: deblur's YAML config, a path or a preset name (default: deblur)")
+    parser.add_argument("overrides", nargs="*", metavar="key=value",
+                        help="with --refine: deblur config overrides, e.g. events.warmup=800")
 
 
 def output_file(path: str):
@@ -59,12 +69,28 @@ def run(args: argparse.Namespace) -> int:
         if args.samples < 2:
             raise InputError("command line", "--samples", "an integer >= 2", args.samples)
         opts = dataclasses.replace(opts, n_samples=args.samples)
+    if not args.refine and (args.config is not None or args.overrides):
+        raise InputError("command line", "--config / key=value", "only with --refine",
+                         args.config or " ".join(args.overrides))
+    cfg = None
+    if args.refine:  # a bad config is said before the scene is read
+        from fusiongs.train.pipeline import resolve_config
+
+        cfg = resolve_config(args.config, args.overrides)
     scene = load_scene(args.scene, sort_events=args.sort, drop_invalid_events=args.drop_invalid)
     if scene.events is None or len(scene.events) == 0:
         raise InputError(args.scene, "events", "a scene with events (thresholds are measured from them)",
                          "no events")
+    if cfg is not None:
+        from fusiongs.train.refine import check_refine
+
+        check_refine(scene, cfg, args.scene)
     t0 = time.perf_counter()
     th = estimate_thresholds(scene.frames, scene.events, opts)
+    if cfg is not None:
+        from fusiongs.train.refine import refine_calibration
+
+        th = refine_calibration(scene, th, cfg, args.scene, log=lambda m: print(m, file=sys.stderr))
     seconds = time.perf_counter() - t0
     truth = true_thresholds(args.scene, scene.events.cfa)
     extra = {"scene": str(args.scene), "seconds": round(seconds, 3)}
@@ -101,14 +127,23 @@ def run(args: argparse.Namespace) -> int:
     gates = [c.get("refractory_gate") for c in th.details.get("per_channel", [])]
     if any(g and g != "neighbours" and g != "off" for g in gates):
         print("refractory gate per channel: " + ", ".join(f"{n} {g}" for n, g in zip(th.channels, gates)))
-    for warning in calibration_warnings(th):
-        print(f"warning: {warning}", file=sys.stderr)
+    if cfg is None:  # a refinement's training said them when it started
+        for warning in calibration_warnings(th):
+            print(f"warning: {warning}", file=sys.stderr)
     if not th.scale_known:
         why = ("the frames' consistency fit failed on every channel"
                if th.details.get("consistency_fit") else "fewer than two frames")
         print(f"note: {why}, so the thresholds are known only up to a common scale: "
               f"the ON/OFF ratio is measured, the scale assumed ({th.details.get('assumed_scale')})",
               file=sys.stderr)
+    refine = th.details.get("refine")
+    if isinstance(refine, dict):
+        before = refine["before"]
+        print(f"refined: the frames-only warm-up ({refine['iterations']} iterations) rendered over "
+              f"{refine['windows']} event windows; before: ON "
+              + "/".join(f"{v:.4f}" for v in before[0]) + ", OFF " + "/".join(f"{v:.4f}" for v in before[1])
+              + ("; raised where the renders fit a larger θ" if any(map(any, refine["raised"]))
+                 else "; nothing raised"))
     print(f"wrote {out} ({th.method}; {seconds:.1f} s)")
     return 0
 

@@ -277,6 +277,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     from fusiongs.events.thresholds import read_calibration, write_calibration
     from fusiongs.train.outputs import EXPOSURE_FILE, read_exposure, write_outputs
     from fusiongs.train.poses_stage import needs_pose_stage, run_pose_stage
+    from fusiongs.train.refine import REFINED_FILE, floor_calibration
 
     k = parse_holdout(holdout)
     cfg = resolve_config(config, overrides)
@@ -295,6 +296,9 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     scene = dataclasses.replace(fit_scene, frames=scene.frames)  # every frame, the run's camera/poses
     if tr.initial_thresholds is not None:
         write_calibration(out / "calibration.json", tr.initial_thresholds, scene=str(scene_path))
+    refined = floor_calibration(tr)  # θ when the events started, as `fusiongs calibrate --refine`
+    if refined is not None:
+        write_calibration(out / REFINED_FILE, refined, scene=str(scene_path))
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset

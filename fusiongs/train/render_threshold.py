@@ -14,6 +14,9 @@ it cannot lower a calibration that is too high.
 
 Counts that are lower bounds (the pixel hit its dead time in the window: ``TrainData.censored_map``)
 are left out of the fit.
+
+:func:`refined_thresholds` writes the raised θ as a calibration (``fusiongs calibrate --refine``,
+``OUT/calibration_refined.json`` of ``deblur``).
 """
 
 from __future__ import annotations
@@ -22,8 +25,10 @@ import math
 from dataclasses import dataclass
 
 import kornia
+import numpy as np
 import torch
 
+from fusiongs.events.thresholds import SensorThresholds
 from fusiongs.losses.event import delta_log, select_channel
 from fusiongs.train.data import TrainData
 
@@ -161,3 +166,37 @@ def apply_render_floor(state, data: TrainData, cfg) -> tuple[torch.Tensor, torch
     with torch.no_grad():
         log_theta.copy_(raise_to_render_floor(log_theta.detach(), floor))
     return before, torch.exp(log_theta.detach()).cpu()
+
+
+# One-sigma relative uncertainty of a θ the floor raised: the raised θ's rms log error over the 26
+# tuning scenes of benchmarks/RESULTS.md session 52 was 0.112 (the same 12 % as a calibration whose
+# refractory gate fell back, CalibrateOptions.systematic_fallback).
+REFINED_SYSTEMATIC = 0.12
+
+
+def refined_thresholds(calibration: SensorThresholds, before: torch.Tensor, after: torch.Tensor,
+                       **details) -> SensorThresholds:
+    """The calibration with the θ that :func:`raise_to_render_floor` raised put in, as a calibration.
+
+    Args:
+        calibration: where θ started (its channels match the trainer's: one grey, or R, G, B).
+        before, after: ``[2, C]`` θ before and after the floor (row 0 ON, row 1 OFF).
+        details: recorded under ``details["refine"]`` (iterations, windows, low-pass, ...).
+
+    Returns:
+        :class:`SensorThresholds` whose raised entries carry a ``REFINED_SYSTEMATIC`` relative
+        one-sigma (the others keep the calibration's), ``method`` "<calibration's> + render floor"
+        and ``details["refine"]`` with θ before and which entries were raised.
+    """
+    b = before.detach().double().cpu().numpy()
+    a = after.detach().double().cpu().numpy()
+    if a.shape != (2, calibration.n_channels) or b.shape != a.shape:
+        raise ValueError(f"thresholds of shape {tuple(a.shape)} for a {calibration.n_channels}-channel "
+                         "calibration")
+    raised = a > b
+    std = np.stack([calibration.std_pos, calibration.std_neg])
+    std = np.where(raised, REFINED_SYSTEMATIC * a, std)
+    info = {"method": "render_floor", "before": b.tolist(), "raised": raised.tolist(),
+            "systematic": REFINED_SYSTEMATIC, **details}
+    return SensorThresholds(calibration.channels, a[0], a[1], std[0], std[1], calibration.scale_known,
+                            f"{calibration.method} + render floor", {**calibration.details, "refine": info})

@@ -64,6 +64,8 @@ class Trained:
     iteration: int
     poses: PoseSamples
     initial_thresholds: SensorThresholds | None = None  # where θ started (calibration)
+    # ``threshold.render_floor``'s ``(θ before, θ after)``, ``[2, C]`` host float64, when it ran
+    threshold_floor: tuple[torch.Tensor, torch.Tensor] | None = None
 
 
 def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
@@ -168,6 +170,7 @@ def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Gen
         "device_generator": {"device": device_gen.device.type, "state": device_gen.get_state()},
         "densify": strategy.state_dict(),
         "psnr_running": None if psnr_running is None else psnr_running.detach().cpu(),
+        "threshold_floor": None if tr.threshold_floor is None else list(tr.threshold_floor),
     }
 
 
@@ -182,11 +185,15 @@ def _restore(ckpt: dict[str, Any], state: FusionState) -> None:
 
 
 def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = False,
-          calibration: SensorThresholds | None = None) -> Trained:
+          calibration: SensorThresholds | None = None, until: int | None = None) -> Trained:
     """Fit the scene; checkpoints go to ``out_dir/checkpoint.pt`` (also on Ctrl-C).
 
     ``calibration`` gives the starting ON/OFF thresholds (``fusiongs calibrate``); without it they
     are estimated the same way (:func:`initial_theta`).
+
+    ``until``: stop at that iteration, before its step (after ``threshold.render_floor`` when that
+    is the iteration the events start), with every schedule still that of the whole run: the state
+    is the one a full run has there (``fusiongs calibrate --refine``).
 
     The progress bar shows the loss, the number of Gaussians and a running PSNR of the re-rendered
     blurry frames against the captured ones.
@@ -254,6 +261,10 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             if ckpt.get("psnr_running") is not None:
                 psnr_now = ckpt["psnr_running"].to(device)
     tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
+    if ckpt is not None and ckpt.get("threshold_floor") is not None:
+        with checkpoint_errors(ckpt_path):
+            before, after = (torch.as_tensor(v, dtype=torch.float64) for v in ckpt["threshold_floor"])
+            tr.threshold_floor = before, after
     # a bar on a terminal only: a log or CI gets pipeline.run_deblur's one summary line
     tty = sys.stderr is not None and sys.stderr.isatty()
     bar = tqdm(range(start, cfg.optim.iterations), initial=start, total=cfg.optim.iterations,
@@ -277,7 +288,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
             frame = order[it % len(order)]
             lam_ev = _event_weight(cfg, data, it)
             if it == cfg.events.warmup and cfg.threshold.render_floor:
-                _floor_thresholds(state, data, cfg)
+                tr.threshold_floor = _floor_thresholds(state, data, cfg)
+            if until is not None and it >= until:
+                break
             _schedule(state, strategy, opts, cfg, it, extent, lam_ev)
             res = training_step(state, data, cfg, frame, lam_ev, gen, it, _coarse(cfg, data, it, lam_ev),
                                 device_gen=device_gen, lowpass_history=lp_history)
@@ -428,8 +441,10 @@ def reset_event_weights(data: TrainData, theta0: SensorThresholds, device: torch
     return None if w is None else torch.from_numpy(w).to(device)
 
 
-def _floor_thresholds(state: FusionState, data: TrainData, cfg: DeblurConfig) -> None:
-    """``threshold.render_floor``: raise θ to what the renders fit to the counts; says so."""
+def _floor_thresholds(state: FusionState, data: TrainData, cfg: DeblurConfig
+                      ) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """``threshold.render_floor``: raise θ to what the renders fit to the counts; says so.
+    Returns ``(θ before, θ after)`` (``[2, C]`` host float64), or None where it does not apply."""
     from fusiongs.train.render_threshold import apply_render_floor
 
     moved = apply_render_floor(state, data, cfg)
@@ -439,6 +454,7 @@ def _floor_thresholds(state: FusionState, data: TrainData, cfg: DeblurConfig) ->
                 f"{v:.3f}" for v in t[1].tolist())
         print(f"fusiongs: θ raised to the renders' floor when the events start: {fmt(moved[0])} -> "
               f"{fmt(moved[1])}", file=sys.stderr)
+    return None if moved is None else (moved[0].double(), moved[1].double())
 
 
 def _event_weight(cfg: DeblurConfig, data: TrainData, it: int) -> float:
