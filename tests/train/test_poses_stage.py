@@ -75,6 +75,22 @@ def test_deblur_estimates_camera_and_trajectory_first(raw_sim_scene, tmp_path, c
     assert (out / "deblurred" / f"{fs.names[0]}.png").is_file()
 
 
+def test_calibrate_refine_poses_a_raw_recording_first_and_writes_nothing_beside_it(raw_sim_scene, tmp_path,
+                                                                                   capsys):
+    """``fusiongs calibrate --refine`` on a recording without trajectory or intrinsics goes through
+    deblur's pose stage (in a temporary folder: the scene folder and the output's folder get
+    nothing but the calibration)."""
+    before = sorted(p.name for p in raw_sim_scene.rglob("*"))
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(raw_sim_scene), "-o", str(out), "--refine", *TINY]) == 0
+    captured = capsys.readouterr()
+    assert "registered 6/6" in captured.err and "refined: the frames-only warm-up" in captured.out
+    assert sorted(p.name for p in out.iterdir()) == ["calibration.json"]
+    assert sorted(p.name for p in raw_sim_scene.rglob("*")) == before
+    doc = json.loads((out / "calibration.json").read_text())
+    assert doc["thresholds"]["details"]["refine"]["iterations"] == 4
+
+
 def test_a_given_trajectory_is_kept_when_only_the_intrinsics_are_estimated(raw_sim_scene):
     import dataclasses
 

@@ -84,7 +84,8 @@ def test_no_refined_calibration_without_the_floor(tiny_scene, tmp_path, recorded
     from fusiongs.train.refine import REFINED_FILE
 
     out = tmp_path / "run"
-    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY, *START, "threshold.render_floor=false"]) == 0
+    args = ["deblur", str(tiny_scene), "-o", str(out), *TINY, *START, "threshold.render_floor=false"]
+    assert main(args) == 0
     assert not (out / REFINED_FILE).exists() and recorded_floor == []
 
 
