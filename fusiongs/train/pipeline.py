@@ -299,6 +299,8 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     refined = floor_calibration(tr)  # θ when the events started, as `fusiongs calibrate --refine`
     if refined is not None:
         write_calibration(out / REFINED_FILE, refined, scene=str(scene_path))
+    else:  # an earlier run's, in this folder, is not this run's
+        (out / REFINED_FILE).unlink(missing_ok=True)
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset

@@ -81,9 +81,12 @@ def test_a_resumed_finished_run_writes_the_same_refined_calibration(tiny_scene, 
 
 
 def test_no_refined_calibration_without_the_floor(tiny_scene, tmp_path, recorded_floor):
+    """Not written, and an earlier run's in the same folder removed."""
     from fusiongs.train.refine import REFINED_FILE
 
     out = tmp_path / "run"
+    out.mkdir()
+    (out / REFINED_FILE).write_text("{}")
     args = ["deblur", str(tiny_scene), "-o", str(out), *TINY, *START, "threshold.render_floor=false"]
     assert main(args) == 0
     assert not (out / REFINED_FILE).exists() and recorded_floor == []
