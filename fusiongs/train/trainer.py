@@ -264,6 +264,9 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
     if ckpt is not None and ckpt.get("threshold_floor") is not None:
         with checkpoint_errors(ckpt_path):
             before, after = (torch.as_tensor(v, dtype=torch.float64) for v in ckpt["threshold_floor"])
+            shape = tuple(state.threshold.log_theta.shape)
+            if before.shape != shape or after.shape != shape:
+                raise ValueError(f"threshold_floor of shape {tuple(before.shape)}, not {shape}")
             tr.threshold_floor = before, after
     # a bar on a terminal only: a log or CI gets pipeline.run_deblur's one summary line
     tty = sys.stderr is not None and sys.stderr.isatty()

@@ -152,3 +152,19 @@ def test_refined_thresholds_widen_only_what_was_raised():
     assert out.method == "mEDI + render floor"
     with pytest.raises(ValueError, match="3-channel"):
         refined_thresholds(cal, before[:, :1], after[:, :1])
+
+
+def test_a_checkpoint_whose_floor_has_another_shape_is_one_line(tiny_scene, tmp_path, capsys, recorded_floor):
+    """An edited checkpoint's floor of the wrong shape is refused when the run resumes, in one line
+    naming the file, not a traceback when the refined calibration is written."""
+    from fusiongs.train.checkpoint import load_checkpoint, save_checkpoint
+
+    out = tmp_path / "run"
+    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY, *START]) == 0
+    ckpt = load_checkpoint(out / "checkpoint.pt")
+    ckpt["threshold_floor"] = [torch.zeros(3), torch.zeros(3)]
+    save_checkpoint(out / "checkpoint.pt", ckpt)
+    capsys.readouterr()
+    assert main(["deblur", str(tiny_scene), "-o", str(out), "--resume", *TINY, *START]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "checkpoint.pt" in err and "threshold_floor" in err and len(err.splitlines()) == 1
