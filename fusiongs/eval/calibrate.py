@@ -186,7 +186,11 @@ class CalibrateOptions:
             differs from the fit's by more than ``ratio_switch``). Both put 3 of the 73 tuning
             scenes of session 46 outside 10 % against 8, but on fresh test scenes they did worse:
             round trips 1 / 12 against 0 / 12 (1192-1203), auto 2 / 12 against 1 / 12
-            (1204-1215). So the default stays the IV fit's (RESULTS.md, session 49).
+            (1204-1215). So the default stays the IV fit's (RESULTS.md, session 49). Nor do the
+            round trips mend the estimates whose refractory gate fell back: on the 39 corner
+            tuning scenes of session 51 they put 7 outside 10 % against 6: the four fallback
+            scenes outside 10 % there are off mostly in the common scale (-42 to +39 %), which
+            the round trips keep (RESULTS.md, session 54).
         ratio_switch: with ``ratio="auto"`` the round trips' ratio replaces the fit's only where
             the two differ by more than this (in log ratio); elsewhere the fit's is kept.
         systematic: relative one-sigma uncertainty added in quadrature to each estimate's
