@@ -103,8 +103,13 @@ def run(args: argparse.Namespace) -> int:
     print(format_table(th, truth))
     dead = th.details.get("dead_time_us")
     if isinstance(dead, int | float):
-        print(f"dead time (floor of the intervals between a pixel's events): {dead:.0f} µs; deblur takes the "
-              "counts of pixels firing faster than events.censor (default 2) times it as lower bounds"
+        period = th.details.get("refractory_period_us")
+        head = (f"refractory period (where a pixel's event intervals step up): {period:.0f} µs; dead time "
+                f"(the gates' unit, the left edge of its histogram bin): {dead:.0f} µs"
+                if isinstance(period, int | float) and period != dead else
+                f"dead time (floor of the intervals between a pixel's events): {dead:.0f} µs")
+        print(f"{head}; deblur takes the counts of pixels firing faster than events.censor (default 2) "
+              "times it as lower bounds"
               if dead > 0 else
               "dead time: no refractory floor in the event intervals (no counts are censored)")
     if str(th.details.get("pixel_model", "")).startswith("reset") and dead:

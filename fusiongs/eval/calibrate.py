@@ -102,6 +102,7 @@ from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
 from fusiongs.eval.edi import estimate_theta
 from fusiongs.events.stats import (
     interval_floor,
+    located_step_us,
     reset_weights,
     spatial_hot_pixels,
     threshold_spread,
@@ -132,7 +133,11 @@ class CalibrateOptions:
         hot_floor: see ``hot_factor``.
         refractory_gate: a pixel is left out of a pair when a pixel within ``refractory_radius``
             has two events closer than this multiple of the estimated dead time inside it (0
-            disables the gate).
+            disables the gate). The dead time is the left edge of the interval histogram's bin
+            that holds the step, up to 15 % below the sensor's refractory period
+            (``details["refractory_period_us"]``, :func:`fusiongs.events.stats.located_step_us`);
+            with the gate at 2 or 1.75 times the located period instead, 11 of the 61 plain tuning
+            scenes of session 46 were outside 10 % against 7 (RESULTS.md, session 55).
         refractory_radius: see ``refractory_gate`` (pixels, a square).
         refractory_self: the pixel's own fast events gate it too (off: they scale with its own
             threshold, so the gate would select pixels by the quantity being measured).
@@ -449,7 +454,11 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
                "ratio_from_event_balance": [r["ratio"] for r in ratio], "dead_time_us": fit["dead"],
                "pixel_model": model + (" (auto)" * (opts.pixel_model == "auto")),
                "pixel_model_test": test,
-               "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us}}
+               "interval_floor_us": {"step": floor.step_us, "onset": floor.onset_us},
+               # the sensor's refractory period; dead_time_us (a histogram bin's edge) stays the
+               # gates' and deblur's unit (stats.located_step_us: in this one they did worse)
+               "refractory_period_us": (located_step_us(events, fit["dead"]) if model == "step"
+                                        else fit["dead"])}
     if model == "reset":
         details["reset_weight_cap"] = opts.reset_weight_cap
         details["reset_burst_end"] = opts.reset_burst_end

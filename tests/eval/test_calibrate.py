@@ -13,7 +13,7 @@ from fusiongs.errors import InputError
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 from fusiongs.eval.calibrate_data import refractory_mask
 from fusiongs.eval.calibrate_pool import discrepant_channels, shrink_channels
-from fusiongs.events.stats import IntervalFloor, dead_time_us, interval_floor
+from fusiongs.events.stats import IntervalFloor, dead_time_us, interval_floor, located_step_us
 from fusiongs.events.stats import spatial_hot_pixels as hot_pixels
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import SensorThresholds, read_calibration, write_calibration
@@ -158,6 +158,18 @@ def test_a_dead_time_inside_a_bin_is_found():
     order = np.argsort(tt, kind="stable")
     ev = EventStream.create(np.rint(tt[order]), pp[order] % 20, pp[order] // 20, np.ones(tt.size), 20, 10)
     assert 850 <= dead_time_us(ev) <= 957
+
+
+@pytest.mark.parametrize("floor_us", [867, 930, 999, 1234])
+def test_the_refractory_period_is_located_inside_its_histogram_bin(floor_us):
+    """The log bins (866-1000 µs, 1000-1155 µs, ...) only bracket the floor, and the dead time is
+    their left edge; the 1 µs change point finds it wherever in its bin it lies, under background
+    activity too."""
+    ev = _bursts_and_noise(6000, np.random.default_rng(floor_us), floor_us=float(floor_us))
+    coarse = dead_time_us(ev)
+    assert coarse in np.round(np.geomspace(1.0, 1e5, 81))  # a bin's edge (866, 1000, 1155 µs)
+    assert abs(located_step_us(ev, coarse) - floor_us) <= 1
+    assert located_step_us(ev, 0.0) == 0.0
 
 
 def test_a_smooth_rise_of_the_intervals_is_no_dead_time():
