@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_calibrate_resim import (
+    estimated_sensor,
     events_with,
     fast_steps,
     isolated_rates,
@@ -81,6 +82,18 @@ def test_events_with_uses_the_given_thresholds_and_dead_time():
     assert int(on.sum()) == 4 and int((~on).sum()) == 5  # floor(1.0 / θ) crossings each
     slow = events_with(cfg, dataclasses.replace(quiet, refractory_s=4e-3), logs, (0.25, 0.2), 0.0, seed=0)
     assert len(slow) < len(ev)  # the dead time drops crossings
+
+
+def test_the_twin_takes_the_located_refractory_period():
+    """The twin's dead time is the period the recording's intervals step at, not the histogram
+    bin's left edge the gates count in (866 µs for a 972 µs sensor); a calibration written before
+    the period was reported gives the edge."""
+    ev = _stream([_poisson(2.0, None, np.random.default_rng(0))])
+    est = SimpleNamespace(details={"dead_time_us": 866.0, "refractory_period_us": 972.0})
+    params, _ = estimated_sensor(DVSParams(), est, ev, T)
+    assert params.refractory_s == pytest.approx(972e-6)
+    est.details.pop("refractory_period_us")
+    assert estimated_sensor(DVSParams(), est, ev, T)[0].refractory_s == pytest.approx(866e-6)
 
 
 def test_own_log_takes_each_pixels_channel():
