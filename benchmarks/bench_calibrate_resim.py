@@ -250,9 +250,9 @@ def isolated_rates(events: EventStream, hot: np.ndarray, duration: float, bin_s:
 
 
 def estimated_sensor(params: DVSParams, est, events: EventStream, duration: float) -> tuple[DVSParams, float]:
-    """``params`` with the dead time (the located refractory period), hot pixels, background activity and leak as the recording
-    tells them (θ fields unchanged; ``eps`` kept), and the relative threshold spread (from the
-    estimator's details)."""
+    """``params`` with the dead time (the located refractory period), hot pixels, background
+    activity and leak as the recording tells them (θ fields unchanged; ``eps`` kept), and the
+    relative threshold spread (from the estimator's details)."""
     d = est.details
     var = (d.get("threshold_spread") or {}).get("log_variance", [0.0, 0.0])
     rel = float(np.sqrt(max(float(np.mean(var)), 0.0)))
