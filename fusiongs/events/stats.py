@@ -170,6 +170,12 @@ def dead_time_us(events: EventStream, jump: float = 5.0, plateau: float = 1.5,
     return 0.0 if hist is None else _step_us(*hist, jump, plateau, max_us)
 
 
+def _interval_edges() -> np.ndarray:
+    """``[B + 1]`` µs edges of the interval histogram: 16 log bins a decade from 1 µs to 0.1 s,
+    rounded to the timestamps' unit."""
+    return np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
+
+
 def _interval_hist(events: EventStream) -> tuple[np.ndarray, np.ndarray, int] | None:
     """``(counts [B + 2] float64, edges [B + 1] µs, intervals)`` of the same-pixel intervals on
     16 log bins a decade from 1 µs to 0.1 s (two empty bins appended), None below 100 intervals."""
@@ -177,7 +183,7 @@ def _interval_hist(events: EventStream) -> tuple[np.ndarray, np.ndarray, int] | 
 
     if len(events) < 2:
         return None
-    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))
+    edges = _interval_edges()
     h, n_intervals = interval_histogram(events.t, events.x, events.y, events.width,
                                         events.height * events.width, edges)
     if n_intervals < 100:
@@ -225,7 +231,7 @@ def located_step_us(events: EventStream, step_us: float) -> float:
 
     from fusiongs.events._kernels import interval_histogram
 
-    edges = np.unique(np.round(np.geomspace(1.0, 1e5, 81)))  # the bins of _interval_hist
+    edges = _interval_edges()
     k = int(np.searchsorted(edges, step_us))
     lo, hi = float(edges[max(k - 1, 0)]), float(edges[min(k + 2, len(edges) - 1)])
     fine = np.arange(lo, hi + 1.0)
