@@ -16,6 +16,15 @@ twin's frames are the scene's). The twin's counts have lost no crossing. The row
 If ``twin counts, scene's gate`` is as far off as ``scene, step``, the error comes from the pairs
 the gate selects; if it is near the truth, from the crossings lost in the kept pairs.
 
+Two more rows test the pixel's own gate (the estimator's fallback where the neighbours' gate
+leaves no measurement), the only gate in both:
+
+- ``scene, own gate``: the scene's counts, pairs gated by the pixel's own fast events;
+- ``twin, own gate``: the twin's counts, gated by the twin's own fast events at the scene's dead
+  time: an ideal sensor (no crossing lost anywhere) with the same selection rule. If it is as far
+  off as ``scene, own gate``, the own gate's error is its selection on the pixel's own counts,
+  which the dead time does not need to make.
+
 Simulated scenes only (the truth and the simulator's configuration are read). The gate is swapped
 in this process only (:func:`estimate_with_gate`); no production code path changes.
 
@@ -48,10 +57,11 @@ from fusiongs.frames.frameset import FrameSet  # noqa: E402
 
 
 @contextlib.contextmanager
-def gate_from(events: EventStream, jump: float):
-    """Within the block, :func:`estimate_thresholds` takes its dead time (the interval floor) and
-    its refractory gate from ``events`` instead of the stream it fits."""
-    floor = interval_floor(events, jump)
+def gate_from(events: EventStream, jump: float, floor_events: EventStream | None = None):
+    """Within the block, :func:`estimate_thresholds` takes its dead time (the interval floor of
+    ``floor_events``, by default ``events``) and its refractory gate from ``events`` instead of the
+    stream it fits."""
+    floor = interval_floor(events if floor_events is None else floor_events, jump)
     saved = calibrate.gate_inputs, calibrate.interval_floor
     calibrate.gate_inputs = lambda frames, _ev, opts, dead: gate_inputs(frames, events, opts, dead)
     calibrate.interval_floor = lambda _ev, _jump: floor
@@ -62,13 +72,14 @@ def gate_from(events: EventStream, jump: float):
 
 
 def estimate_with_gate(frames: FrameSet, events: EventStream, gate_events: EventStream,
-                       opts: CalibrateOptions):
-    """:func:`estimate_thresholds` on ``events`` with the dead time and gate of ``gate_events``
-    (a stream of the same sensor size and span)."""
-    if (gate_events.width, gate_events.height) != (events.width, events.height):
-        raise ValueError(f"the gate's stream is {gate_events.width}x{gate_events.height}, the fitted "
-                         f"one {events.width}x{events.height}")
-    with gate_from(gate_events, opts.dead_time_jump):
+                       opts: CalibrateOptions, floor_events: EventStream | None = None):
+    """:func:`estimate_thresholds` on ``events`` with the gate of ``gate_events`` and the dead time
+    of ``floor_events`` (default ``gate_events``; streams of the same sensor size and span)."""
+    for other, what in ((gate_events, "gate's"), (floor_events, "dead time's")):
+        if other is not None and (other.width, other.height) != (events.width, events.height):
+            raise ValueError(f"the {what} stream is {other.width}x{other.height}, the fitted "
+                             f"one {events.width}x{events.height}")
+    with gate_from(gate_events, opts.dead_time_jump, floor_events):
         return estimate_thresholds(frames, events, opts)
 
 
@@ -78,19 +89,23 @@ def errors(est, truth) -> np.ndarray:
 
 
 def rows(scene: Path, twin: Path) -> list[dict]:
-    """The five estimates of the module docstring on ``scene`` and its ``twin``."""
+    """The seven estimates of the module docstring on ``scene`` and its ``twin``."""
     from fusiongs.eval.truth import true_thresholds
     from fusiongs.io.scene_io import load_scene
 
     sc, tw = load_scene(scene), load_scene(twin)
     truth = true_thresholds(scene, sc.events.cfa)
     step = CalibrateOptions(pixel_model="step")
+    own = replace(step, refractory_self=True, refractory_radius=0)  # the pixel's own gate only
     runs = [("scene", lambda: estimate_thresholds(sc.frames, sc.events, CalibrateOptions())),
             ("scene, step", lambda: estimate_thresholds(sc.frames, sc.events, step)),
             ("twin, no gate", lambda: estimate_thresholds(sc.frames, tw.events, step)),
             ("scene, gate off", lambda: estimate_thresholds(sc.frames, sc.events,
                                                             replace(step, refractory_gate=0.0))),
-            ("twin counts, scene's gate", lambda: estimate_with_gate(sc.frames, tw.events, sc.events, step))]
+            ("twin counts, scene's gate", lambda: estimate_with_gate(sc.frames, tw.events, sc.events, step)),
+            ("scene, own gate", lambda: estimate_thresholds(sc.frames, sc.events, own)),
+            ("twin, own gate", lambda: estimate_with_gate(sc.frames, tw.events, tw.events, own,
+                                                          floor_events=sc.events))]
     out = []
     for name, run in runs:
         est = run()

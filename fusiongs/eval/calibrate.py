@@ -27,11 +27,14 @@ only absorb that drift by shrinking (METHOD.md section 4). Gates: refractory los
 fast edges, so a pixel is left out of a pair when one of its neighbours has two events closer than
 twice the sensor's dead time (the floor of the inter-event interval histogram) inside it: an edge
 that fast loses events at the pixel too, and may leave it a single event, which no interval can
-show. The pixel's own intervals are not used: they scale with its own threshold, so a gate on them
-keeps the pixels with large thresholds (measured on tuning seed 75: +10 to +24 % against -16 to
--7 % with the neighbours' gate). Saturated and near-black pixels (quantised, compressed by the log
-offset of the sensor) are left out; hot pixels are spatial outliers of the event count. The
-uncertainty is a bootstrap over spatial tiles.
+show. The pixel's own intervals are not used: a gate on them selects the pixel's pairs by its own
+counts (a pair whose count fell short of its change has fewer close events, so it is kept more
+often), which biases the fit high even on a sensor without dead time (tuning seed 75: +10 to +24 %
+against -16 to -7 % with the neighbours' gate; twins of tuning 319 and 456 without a dead time:
++82 and +96 % with the own gate, -14 and +7 % with none; RESULTS.md, sessions 12 and 58).
+Saturated and near-black pixels (quantised, compressed by the log offset of the sensor) are left
+out; hot pixels are spatial outliers of the event count. The uncertainty is a bootstrap over
+spatial tiles.
 
 A DVS pixel held in reset during its dead time (Lichtsteiner et al., IEEE JSSC 2008) loses all
 the change of its blind time, not only the events: every event on a fast edge stands for more
@@ -139,17 +142,18 @@ class CalibrateOptions:
             with the gate at 2 or 1.75 times the located period instead, 11 of the 61 plain tuning
             scenes of session 46 were outside 10 % against 7 (RESULTS.md, session 55).
         refractory_radius: see ``refractory_gate`` (pixels, a square).
-        refractory_self: the pixel's own fast events gate it too (off: they scale with its own
-            threshold, so the gate would select pixels by the quantity being measured).
+        refractory_self: the pixel's own fast events gate it too (off: the gate would select the
+            pixel's pairs by its own counts, the regressor of the fit; see the module docstring).
         refractory_max_uncertainty: when the fit with the neighbours' gate fails, or its bootstrap
             uncertainty (relative std of either threshold) exceeds this, the channel is fitted
             again with the pixel's own gate (a dark scene's events sit on fast edges, and the
             neighbours' gate may leave pairs without signal). Tuning scenes: at most 0.06.
         own_gate_max_spread: the refit with the pixel's own gate is made only when the fit failed
             outright or the measured threshold spread is small (``exp(var log theta)`` of both
-            polarities at most this): the own gate leaves out the pixels with small thresholds, a
-            selection that grows with the spread (tuning seed 75, RESULTS.md, session 12; test
-            seed 1076, session 15: +84 %). Otherwise the uncertain neighbours' fit is kept.
+            polarities at most this): the own gate's fits read high, more so at large spread
+            (tuning seed 75, RESULTS.md, session 12; test seed 1076, session 15: +84 %); the
+            selection is on the pixel pair's count, not on the pixel's threshold (sessions 22, 55,
+            58). Otherwise the uncertain neighbours' fit is kept.
         dead_time_jump: jump factor of the interval histogram that marks the dead time
             (:func:`fusiongs.events.stats.dead_time_us`).
         pixel_model: how the sensor's pixels lose events in their dead time: ``"step"`` (the
@@ -360,7 +364,7 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
                              f"{int(data.valid.sum())}")
         res = search_both(data, opts, rng)
         if gate == "neighbours" and _unreliable(res, opts) and not (_failed(res) or spread_small):
-            gate = "neighbours (uncertain; the pixel's own gate would select by threshold at this spread)"
+            gate = "neighbours (uncertain; the pixel's own gate reads high at this spread)"
             fallback = True
         elif gate == "neighbours" and _unreliable(res, opts):
             # A dark scene's events sit on fast edges and every pixel near one is gated: what is

@@ -207,8 +207,8 @@ def test_gates_named_in_the_details_and_the_own_gate_when_the_neighbours_leave_n
         bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0))
     ch = own.details["per_channel"][0]
     assert ch["refractory_gate"].startswith("pixel") and ch["neighbour_gate_fit"]["theta_pos"] > 0
-    # ...unless the thresholds spread more than own_gate_max_spread allows: the own gate would
-    # select pixels by their threshold, so the uncertain neighbours' fit is kept as it is
+    # ...unless the thresholds spread more than own_gate_max_spread allows: the own gate's fit
+    # reads high there, so the uncertain neighbours' fit is kept as it is
     kept = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
         bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=0.5))
     assert kept.details["per_channel"][0]["refractory_gate"].startswith("neighbours (uncertain")

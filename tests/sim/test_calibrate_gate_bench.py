@@ -50,12 +50,33 @@ def test_a_gate_without_dead_time_keeps_every_pair(scene):
     assert other.details["per_channel"][0]["kept"] > gated.details["per_channel"][0]["kept"]
 
 
+def test_the_dead_time_can_come_from_a_third_stream(scene):
+    """``floor_events`` sets the dead time, ``gate_events`` the fast events: the quiet stream has no
+    floor of its own (gate off), and with the scene's floor its own gate still leaves every pair
+    (the fit is the gate-off one), under the scene's dead time and the own gate's name."""
+    ev = scene.events
+    own = replace(STEP, refractory_self=True, refractory_radius=0)
+    n = 50
+    quiet = EventStream.create(np.arange(n, dtype=np.int64) * 9_000, np.zeros(n, np.int64),
+                               np.zeros(n, np.int64), np.ones(n, np.int64), ev.width, ev.height)
+    alone = estimate_with_gate(scene.frames, ev, quiet, own)
+    floored = estimate_with_gate(scene.frames, ev, quiet, own, floor_events=ev)
+    scene_own = estimate_thresholds(scene.frames, ev, own)
+    assert alone.details["per_channel"][0]["refractory_gate"] == "off"
+    assert floored.details["per_channel"][0]["refractory_gate"] == "pixel"
+    assert floored.details["dead_time_us"] == scene_own.details["dead_time_us"] > 0
+    np.testing.assert_array_equal(floored.theta_pos, alone.theta_pos)
+    assert floored.details["per_channel"][0]["kept"] > scene_own.details["per_channel"][0]["kept"]
+
+
 def test_a_gate_of_another_size_is_refused(scene):
     ev = scene.events
     small = EventStream.create(np.array([0, 5000]), np.array([0, 0]), np.array([0, 0]), np.array([1, 1]),
                                ev.width - 1, ev.height)
     with pytest.raises(ValueError, match="gate's stream"):
         estimate_with_gate(scene.frames, ev, small, STEP)
+    with pytest.raises(ValueError, match="dead time's stream"):
+        estimate_with_gate(scene.frames, ev, ev, STEP, floor_events=small)
 
 
 def test_the_gate_follows_the_other_streams_fast_events(scene):
