@@ -25,6 +25,15 @@ leaves no measurement), the only gate in both:
   off as ``scene, own gate``, the own gate's error is its selection on the pixel's own counts,
   which the dead time does not need to make.
 
+Two more move the own gate's selection off the fitted pixel (:func:`instrument_gated_pairs`):
+
+- ``scene, own gate on the instrument`` / ``twin, own gate on the instrument``: each entry fits a
+  pixel ``A``'s counts, instrumented by the counts of one same-channel neighbour ``B`` (each of
+  the four), and is left out when ``B`` has fast events in the pair; ``A`` is not gated. A
+  selection on the instrument's own counts does not bias an IV fit when ``B``'s count noise is
+  independent of ``A``'s (it is, on an ideal sensor), so on the twin this row should read near
+  the truth where ``twin, own gate`` reads high; on the scene it keeps ``A``'s lost crossings.
+
 Simulated scenes only (the truth and the simulator's configuration are read). The gate is swapped
 in this process only (:func:`estimate_with_gate`); no production code path changes.
 
@@ -45,12 +54,14 @@ from pathlib import Path
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import fusiongs.eval.calibrate as calibrate  # noqa: E402
 from benchmarks.bench_calibrate import relative_errors  # noqa: E402
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds  # noqa: E402
-from fusiongs.eval.calibrate_data import gate_inputs  # noqa: E402
+from fusiongs.eval.calibrate_data import frame_pairs, gate_inputs, tile_ids  # noqa: E402
+from fusiongs.eval.calibrate_fit import PairData  # noqa: E402
 from fusiongs.events.stats import interval_floor  # noqa: E402
 from fusiongs.events.stream import EventStream  # noqa: E402
 from fusiongs.frames.frameset import FrameSet  # noqa: E402
@@ -83,19 +94,94 @@ def estimate_with_gate(frames: FrameSet, events: EventStream, gate_events: Event
         return estimate_thresholds(frames, events, opts)
 
 
+def _pair_sums(per_gap: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """Sums over the consecutive frame gaps each pair spans: ``[F-1, ...]`` -> ``[Q, ...]``."""
+    cum = np.concatenate([np.zeros((1, *per_gap.shape[1:]), per_gap.dtype), np.cumsum(per_gap, axis=0)])
+    return cum[pairs[:, 1]] - cum[pairs[:, 0]]
+
+
+def instrument_gated_pairs(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray,
+                           pix: np.ndarray, fast: np.ndarray, frame_ok: np.ndarray, height: int,
+                           width: int, step: int, tile: int, max_gap: int) -> PairData:
+    """:class:`PairData` whose entries are (pixel ``A``, instrument pixel ``B``) for every ``B`` in
+    ``pix`` and each of its four same-channel neighbours ``A`` (``step`` pixels away, inside the
+    sensor), gated by ``B``'s own fast events only.
+
+    Args:
+        sens, counts, between, frame_ok: as for :func:`fusiongs.eval.calibrate_data.prepare_channel`.
+        pix: ``[P]`` flat indices of the instrument pixels ``B``.
+        fast: ``[F-1, H*W]`` bool, the pixel has two events closer than the gap in the pair
+            (:func:`fusiongs.eval.calibrate_data.gate_inputs`).
+        height, width: the sensor. step: 1 (grey) or 2 (CFA). tile: bootstrap tile side (``B``'s tile).
+        max_gap: longest baseline of the compared frame pairs.
+
+    Returns:
+        ``E <= 4 P`` entries: ``A``'s frames and counts, ``z`` = ``B``'s counts, ``valid`` where
+        ``A`` is lit and unsaturated in both frames, ``B`` has no fast events in any gap the pair
+        spans, and ``A`` moved.
+    """
+    y, x = pix // width, pix % width
+    a_pix, b_pix = [], []
+    for dy, dx in ((step, 0), (-step, 0), (0, step), (0, -step)):
+        yy, xx = y + dy, x + dx
+        inside = (yy >= 0) & (yy < height) & (xx >= 0) & (xx < width)
+        a_pix.append((yy * width + xx)[inside])
+        b_pix.append(pix[inside])
+    a_pix, b_pix = np.concatenate(a_pix), np.concatenate(b_pix)
+    pairs = frame_pairs(sens.shape[0], max_gap)
+    n = np.stack([c[..., a_pix] for c in counts]).astype(np.float32)
+    dn = _pair_sums(between[..., a_pix].astype(np.float32), pairs)
+    z = _pair_sums(between[..., b_pix].astype(np.float32), pairs)
+    gated = _pair_sums(fast[:, b_pix].astype(np.int32), pairs) > 0
+    moved = np.abs(n).sum((1, 2))  # [F] events of A inside each exposure
+    active = (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
+    valid = frame_ok[pairs[:, 0]][:, a_pix] & frame_ok[pairs[:, 1]][:, a_pix] & ~gated & active
+    uniq, tid = np.unique(tile_ids(b_pix, width, tile), return_inverse=True)
+    return PairData(torch.as_tensor(np.log(np.maximum(sens[:, a_pix], 1e-12)), dtype=torch.float32),
+                    torch.as_tensor(n), torch.as_tensor(pairs), torch.as_tensor(dn), torch.as_tensor(valid),
+                    torch.as_tensor(tid.astype(np.int64)), int(uniq.size), torch.as_tensor(z))
+
+
+@contextlib.contextmanager
+def own_gate_on_instrument(height: int, step: int):
+    """Within the block, the pixel pairs that :func:`estimate_thresholds` builds are made by
+    :func:`instrument_gated_pairs` (``height``, ``step`` of the sensor): with the options
+    ``refractory_self=True, refractory_radius=0`` the gate mask it passes is the pixel's own fast
+    events, which then gate the instrument instead of the fitted pixel. A mask that gates nothing
+    (the gate off, or the fallback where it left no pairs) is built as usual."""
+    saved = calibrate.prepare_channel
+
+    def prepare(sens, counts, between, pix, bad_pair, frame_ok, width, tile, max_gap=1, neighbours=None):
+        if not bad_pair.any():
+            return saved(sens, counts, between, pix, bad_pair, frame_ok, width, tile, max_gap, neighbours)
+        return instrument_gated_pairs(sens, counts, between, pix, bad_pair, frame_ok, height, width,
+                                      step, tile, max_gap)
+
+    calibrate.prepare_channel = prepare
+    try:
+        yield
+    finally:
+        calibrate.prepare_channel = saved
+
+
 def errors(est, truth) -> np.ndarray:
     """Relative errors ``[2 C]`` (ON per channel, then OFF per channel)."""
     return np.concatenate(relative_errors(est, truth))
 
 
 def rows(scene: Path, twin: Path) -> list[dict]:
-    """The seven estimates of the module docstring on ``scene`` and its ``twin``."""
+    """The nine estimates of the module docstring on ``scene`` and its ``twin``."""
     from fusiongs.eval.truth import true_thresholds
     from fusiongs.io.scene_io import load_scene
 
     sc, tw = load_scene(scene), load_scene(twin)
     truth = true_thresholds(scene, sc.events.cfa)
     step = CalibrateOptions(pixel_model="step")
+
+    def on_instrument(run):
+        with own_gate_on_instrument(sc.events.height, 1 if sc.events.cfa is None else 2):
+            return run()
+
     own = replace(step, refractory_self=True, refractory_radius=0)  # the pixel's own gate only
     runs = [("scene", lambda: estimate_thresholds(sc.frames, sc.events, CalibrateOptions())),
             ("scene, step", lambda: estimate_thresholds(sc.frames, sc.events, step)),
@@ -105,7 +191,12 @@ def rows(scene: Path, twin: Path) -> list[dict]:
             ("twin counts, scene's gate", lambda: estimate_with_gate(sc.frames, tw.events, sc.events, step)),
             ("scene, own gate", lambda: estimate_thresholds(sc.frames, sc.events, own)),
             ("twin, own gate", lambda: estimate_with_gate(sc.frames, tw.events, tw.events, own,
-                                                          floor_events=sc.events))]
+                                                          floor_events=sc.events)),
+            ("scene, own gate on the instrument",
+             lambda: on_instrument(lambda: estimate_thresholds(sc.frames, sc.events, own))),
+            ("twin, own gate on the instrument",
+             lambda: on_instrument(lambda: estimate_with_gate(sc.frames, tw.events, tw.events, own,
+                                                              floor_events=sc.events)))]
     out = []
     for name, run in runs:
         est = run()

@@ -8,8 +8,14 @@ import numpy as np
 import pytest
 
 import fusiongs.eval.calibrate as calibrate
-from benchmarks.bench_calibrate_gate import estimate_with_gate, main
+from benchmarks.bench_calibrate_gate import (
+    estimate_with_gate,
+    instrument_gated_pairs,
+    main,
+    own_gate_on_instrument,
+)
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
+from fusiongs.eval.calibrate_data import count_inputs, frame_pairs, gate_inputs, saturated, sensor_intensity
 from fusiongs.events.stream import EventStream
 from fusiongs.sim.dvs import DVSParams
 from fusiongs.sim.simulate import SimConfig, run_simulation
@@ -89,6 +95,67 @@ def test_the_gate_follows_the_other_streams_fast_events(scene):
     own = estimate_thresholds(scene.frames, ev, STEP)
     assert other.details["dead_time_us"] == own.details["dead_time_us"] > 0
     assert other.details["per_channel"][0]["kept"] > own.details["per_channel"][0]["kept"]
+
+
+def _channel_inputs(scene, opts):
+    fr, ev = scene.frames, scene.events
+    lin = fr.to_linear()
+    sens = sensor_intensity(lin, ev.cfa)
+    counts, between, _ = count_inputs(fr, ev, opts, None)
+    _, fast, _ = gate_inputs(fr, ev, opts, 600.0)
+    frame_ok = (sens > 0.03 * np.quantile(sens, 0.99)) & ~saturated(lin, opts)
+    return sens, counts, between, fast, frame_ok
+
+
+def test_instrument_gated_pairs_fit_a_neighbour_gated_by_the_instrument(scene):
+    """Every entry is (A, a same-channel neighbour B of it): A's counts as the regressor, B's as
+    the instrument, left out exactly where B has fast events in a spanned gap or A is dark or
+    saturated; A's own fast events gate nothing."""
+    ev = scene.events
+    h, w = ev.height, ev.width
+    sens, counts, between, fast, frame_ok = _channel_inputs(scene, STEP)
+    assert fast.any() and not fast.all()
+    rng = np.random.default_rng(0)
+    pix = np.sort(rng.choice(h * w, 400, replace=False))
+    data = instrument_gated_pairs(sens, counts, between, pix, fast, frame_ok, h, w, 1, 16, 3)
+    pairs = frame_pairs(len(scene.frames), 3)
+    a_pix, b_pix = [], []
+    for dy, dx in ((1, 0), (-1, 0), (0, 1), (0, -1)):  # the brute-force entry list
+        for b in pix:
+            y, x = divmod(int(b), w)
+            if 0 <= y + dy < h and 0 <= x + dx < w:
+                a_pix.append((y + dy) * w + x + dx)
+                b_pix.append(int(b))
+    assert data.dn.shape[-1] == len(a_pix) < 4 * pix.size  # border pixels have fewer neighbours
+    for e in rng.choice(len(a_pix), 60, replace=False):
+        a, b = a_pix[e], b_pix[e]
+        for q, (i, j) in enumerate(pairs):
+            np.testing.assert_array_equal(data.dn[q, :, e].numpy(), between[i:j, :, a].sum(0))
+            np.testing.assert_array_equal(data.z[q, :, e].numpy(), between[i:j, :, b].sum(0))
+            inside = np.abs(counts[i][..., a]).sum() + np.abs(counts[j][..., a]).sum()
+            moved = inside + between[i:j, :, a].sum()
+            want = frame_ok[i, a] and frame_ok[j, a] and not fast[i:j, b].any() and moved > 0
+            assert bool(data.valid[q, e]) == want
+    want_log = np.log(np.maximum(sens[:, a_pix], 1e-12)).astype(np.float32)
+    np.testing.assert_array_equal(data.log_s.numpy(), want_log)
+
+
+def test_the_own_gate_on_the_instrument_is_swapped_in_and_undone(scene):
+    """Under the own gate the swapped pairs change the fit (more pairs kept: the fitted pixel's
+    fast pairs stay in); with the gate off nothing changes; prepare_channel is restored."""
+    own = replace(STEP, refractory_self=True, refractory_radius=0)
+    saved = calibrate.prepare_channel
+    plain = estimate_thresholds(scene.frames, scene.events, own)
+    off = estimate_thresholds(scene.frames, scene.events, replace(own, refractory_gate=0.0))
+    with own_gate_on_instrument(scene.events.height, 1):
+        moved = estimate_thresholds(scene.frames, scene.events, own)
+        still_off = estimate_thresholds(scene.frames, scene.events, replace(own, refractory_gate=0.0))
+    assert calibrate.prepare_channel is saved
+    assert moved.details["per_channel"][0]["refractory_gate"] == "pixel"
+    assert moved.details["per_channel"][0]["kept"] > plain.details["per_channel"][0]["kept"]
+    assert moved.theta_pos[0] != plain.theta_pos[0]
+    np.testing.assert_array_equal(still_off.theta_pos, off.theta_pos)
+    np.testing.assert_array_equal(still_off.theta_neg, off.theta_neg)
 
 
 def test_a_scene_without_truth_is_refused_in_one_line(tmp_path, capsys):
