@@ -75,7 +75,9 @@ Known errors: 11 of the 60 fresh test scenes of sessions 49-51 have an estimate 
 (6 of them among 12 scenes drawn in the corner of thresholds near 0.1 with dead times near 1 ms,
 where the refractory gate leaves almost nothing). The 8 of them where the gate fell back to the
 pixel's own gate, to no gate, or to an uncertain fit are flagged: the estimate then carries a
-larger systematic uncertainty and a warning (``systematic_fallback``). Three causes are known:
+larger systematic uncertainty and a warning (``systematic_fallback``; ``systematic_own_gate``
+where the pixel's own gate was used, whose fit is biased high by its selection and low by the
+losses it cannot see: RESULTS.md, sessions 58-59). Three causes are known:
 the reference level's lag (depth and gallery scenes read +2..+5 %), the gate keeping only slow
 pixel pairs (long-dead-time walls read low), and the pixel's own gate in dark colour scenes.
 benchmarks/RESULTS.md ("Where the estimator's remaining errors come from") lists them with every
@@ -209,16 +211,26 @@ class CalibrateOptions:
             With 0.04 (the value of 0-0.06 whose coverage came nearest 68 / 95 % there): 72 / 94 %;
             on 12 fresh test scenes 71 / 100 % (RESULTS.md, session 49). The bootstrap's own values
             are kept in ``details["std_bootstrap"]``.
-        systematic_fallback: the systematic part instead of ``systematic`` when the refractory
-            gate fell back on any channel: the neighbours' gate left no pixel pair or no reliable
-            fit, so the channel was fitted with the pixel's own gate, without a gate, or kept the
-            uncertain fit (``per_channel[c]["gate_fallback"]``). On the 112 tuning scenes of sessions
-            46 and 51 such estimates were off by 0.124 in log (rms; 7 of the 19 scenes outside 10 %)
-            against 0.046 (7 of 93) for the others, and 0.12 scored best of 0.04-0.20 by the
-            Gaussian log likelihood of the truth (within one / two standard deviations: 84 / 96 %;
-            0.04: 67 / 83 %). On the 60 fresh test scenes of sessions 49-51, chosen on none of
-            them, 8 scenes were so estimated and all 8 were more than 10 % off, against 3 of the
-            other 52 (RESULTS.md, session 51). A warning names the channels.
+        systematic_fallback: the systematic part instead of ``systematic`` when the refractory gate
+            fell back on any channel: the neighbours' gate left no pixel pair or no reliable fit, so
+            the channel was fitted with the pixel's own gate (then ``systematic_own_gate``), without
+            a gate, or kept the uncertain fit (``per_channel[c]["gate_fallback"]``). On the 112
+            tuning scenes of sessions 46 and 51 such estimates were off by 0.124 in log (rms; 7 of
+            the 19 scenes outside 10 %) against 0.046 (7 of 93) for the others, and 0.12 scored best
+            of 0.04-0.20 by the Gaussian log likelihood of the truth (within one / two standard
+            deviations: 84 / 96 %; 0.04: 67 / 83 %). On the 60 fresh test scenes of sessions 49-51,
+            chosen on none of them, 8 scenes were so estimated and all 8 were more than 10 % off,
+            against 3 of the other 52 (RESULTS.md, session 51). A warning names the channels.
+        systematic_own_gate: the systematic part instead of ``systematic_fallback`` when any
+            channel was fitted with the pixel's own gate (``refractory_gate`` "pixel (...)"): that
+            gate's fit carries two biases of its own, its selection of the pixel's pairs by the
+            pixel's own counts (high, up to +96 % on an ideal twin) and the crossings lost inside
+            the pairs it keeps (low), which cancel on some scenes and not on others. On the 7
+            own-gate tuning scenes of sessions 58-59 (30 estimates, rms log error 0.19; 319 and
+            456 +60 to +65 %) 0.20 scored best of 0.04-0.50 by the Gaussian log likelihood of the
+            truth (within one / two standard deviations: 83 / 87 %; 0.12: 73 / 87 %). On the 4
+            own-gate corner test scenes, chosen on none of them: 65 / 70 % (0.12: 40 / 65 %;
+            RESULTS.md, session 59).
         round_trip_tol: largest EDI log change of a round trip.
         round_trip_min_events: fewest events (both polarities together) in a round trip.
         round_trip_min_pairs: fewest round trips for their ratio to be used (else the IV fit's).
@@ -270,6 +282,7 @@ class CalibrateOptions:
     ratio_switch: float = 0.05
     systematic: float = 0.04
     systematic_fallback: float = 0.12
+    systematic_own_gate: float = 0.20
     round_trip_tol: float = 0.1
     round_trip_min_events: float = 6.0
     round_trip_min_pairs: int = 100
@@ -409,7 +422,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     opts = opts or CalibrateOptions()
     if opts.ratio not in RATIO_SOURCES:
         raise InputError("calibrate", "ratio", f"one of {', '.join(RATIO_SOURCES)}", repr(opts.ratio))
-    for name in ("ratio_switch", "systematic", "systematic_fallback"):
+    for name in ("ratio_switch", "systematic", "systematic_fallback", "systematic_own_gate"):
         v = getattr(opts, name)
         if not (is_finite_number(v) and v >= 0):
             raise InputError("calibrate", name, "a finite number >= 0", repr(v))
@@ -499,14 +512,16 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     # The bootstrap sees the tiles' scatter, not the fit's biases: add the systematic part.
     details["std_bootstrap"] = {"std_pos": [float(v) for v in sp], "std_neg": [float(v) for v in sn]}
     fell = [names[c] for c, p in enumerate(per) if p["gate_fallback"]]
-    systematic = opts.systematic_fallback if fell else opts.systematic
+    own = [names[c] for c, p in enumerate(per) if p["refractory_gate"].startswith("pixel (")]
+    systematic = (opts.systematic_own_gate if own else opts.systematic_fallback) if fell else opts.systematic
     details["systematic"] = systematic
     if fell:
+        via = f"; the pixel's own gate on {', '.join(own)}" if own else ""
         details.setdefault("warnings", []).append(
             f"the refractory gate left too few pixel pairs to measure on channel(s) {', '.join(fell)} "
-            f"(dead time {fit['dead']:.0f} µs): such estimates are often more than 10 % off (on the "
-            f"simulator's sweep 15 of 27 scenes; benchmarks/RESULTS.md, session 51), so their "
-            f"uncertainty carries {100 * systematic:g} % (else {100 * opts.systematic:g} %)")
+            f"(dead time {fit['dead']:.0f} µs{via}): such estimates are often more than 10 % off (on "
+            f"the simulator's sweep 15 of 27 scenes; benchmarks/RESULTS.md, sessions 51 and 59), so "
+            f"their uncertainty carries {100 * systematic:g} % (else {100 * opts.systematic:g} %)")
     sp, sn = (np.where(np.isfinite(sd), np.hypot(sd, systematic * th), np.nan)
               for sd, th in ((sp, tp), (sn, tn)))
     return SensorThresholds(names, tp, tn, sp, sn, True,

@@ -501,20 +501,28 @@ def test_a_gate_that_fell_back_widens_the_uncertainty_and_warns(grey_asym):
     own = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
         bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0))
     assert own.details["per_channel"][0]["gate_fallback"]
-    assert own.details["systematic"] == 0.12
+    assert own.details["per_channel"][0]["refractory_gate"].startswith("pixel (")
+    assert own.details["systematic"] == 0.20  # the own gate's systematic part, not the 12 %
     boot = own.details["std_bootstrap"]
-    np.testing.assert_allclose(own.std_pos, np.hypot(boot["std_pos"], 0.12 * own.theta_pos))
-    np.testing.assert_allclose(own.std_neg, np.hypot(boot["std_neg"], 0.12 * own.theta_neg))
+    np.testing.assert_allclose(own.std_pos, np.hypot(boot["std_pos"], 0.20 * own.theta_pos))
+    np.testing.assert_allclose(own.std_neg, np.hypot(boot["std_neg"], 0.20 * own.theta_neg))
     (warning,) = own.details["warnings"]
-    assert "channel(s) grey" in warning and "12 %" in warning
+    assert "channel(s) grey" in warning and "20 %" in warning and "own gate on grey" in warning
+    other = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
+        bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=10.0, systematic_own_gate=0.3))
+    assert other.details["systematic"] == 0.3
+    np.testing.assert_allclose(other.theta_pos, own.theta_pos)  # the estimate itself is untouched
+    np.testing.assert_allclose(other.std_pos, np.hypot(boot["std_pos"], 0.3 * own.theta_pos))
     # the uncertain neighbours' fit kept as it is counts as a fallback too, with its estimate untouched
     kept = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(
         bootstrap=50, refractory_max_uncertainty=0.0, own_gate_max_spread=0.5, systematic_fallback=0.2))
     assert kept.details["per_channel"][0]["gate_fallback"] and kept.details["systematic"] == 0.2
     np.testing.assert_allclose(kept.theta_pos, base.theta_pos)
-    for bad in (-0.01, float("nan"), None):
-        with pytest.raises(InputError, match="systematic_fallback"):
-            estimate_thresholds(sc.frames, sc.events, CalibrateOptions(systematic_fallback=bad))
+    assert "own gate" not in kept.details["warnings"][0]
+    for name in ("systematic_fallback", "systematic_own_gate"):
+        for bad in (-0.01, float("nan"), None):
+            with pytest.raises(InputError, match=name):
+                estimate_thresholds(sc.frames, sc.events, CalibrateOptions(**{name: bad}))
 
 
 def test_cli_prints_the_calibration_warnings(grey_dir, tmp_path, capsys, monkeypatch):
