@@ -60,7 +60,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import fusiongs.eval.calibrate as calibrate  # noqa: E402
 from benchmarks.bench_calibrate import relative_errors  # noqa: E402
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds  # noqa: E402
-from fusiongs.eval.calibrate_data import frame_pairs, gate_inputs, tile_ids  # noqa: E402
+from fusiongs.eval.calibrate_data import active_pairs, frame_pairs, gate_inputs, pair_sums, tile_ids  # noqa: E402
 from fusiongs.eval.calibrate_fit import PairData  # noqa: E402
 from fusiongs.events.stats import interval_floor  # noqa: E402
 from fusiongs.events.stream import EventStream  # noqa: E402
@@ -94,12 +94,6 @@ def estimate_with_gate(frames: FrameSet, events: EventStream, gate_events: Event
         return estimate_thresholds(frames, events, opts)
 
 
-def _pair_sums(per_gap: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """Sums over the consecutive frame gaps each pair spans: ``[F-1, ...]`` -> ``[Q, ...]``."""
-    cum = np.concatenate([np.zeros((1, *per_gap.shape[1:]), per_gap.dtype), np.cumsum(per_gap, axis=0)])
-    return cum[pairs[:, 1]] - cum[pairs[:, 0]]
-
-
 def instrument_gated_pairs(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray,
                            pix: np.ndarray, fast: np.ndarray, frame_ok: np.ndarray, height: int,
                            width: int, step: int, tile: int, max_gap: int) -> PairData:
@@ -130,12 +124,11 @@ def instrument_gated_pairs(sens: np.ndarray, counts: list[np.ndarray], between: 
     a_pix, b_pix = np.concatenate(a_pix), np.concatenate(b_pix)
     pairs = frame_pairs(sens.shape[0], max_gap)
     n = np.stack([c[..., a_pix] for c in counts]).astype(np.float32)
-    dn = _pair_sums(between[..., a_pix].astype(np.float32), pairs)
-    z = _pair_sums(between[..., b_pix].astype(np.float32), pairs)
-    gated = _pair_sums(fast[:, b_pix].astype(np.int32), pairs) > 0
-    moved = np.abs(n).sum((1, 2))  # [F] events of A inside each exposure
-    active = (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
-    valid = frame_ok[pairs[:, 0]][:, a_pix] & frame_ok[pairs[:, 1]][:, a_pix] & ~gated & active
+    dn = pair_sums(between[..., a_pix].astype(np.float32), pairs)
+    z = pair_sums(between[..., b_pix].astype(np.float32), pairs)
+    gated = pair_sums(fast[:, b_pix].astype(np.int32), pairs) > 0
+    valid = (frame_ok[pairs[:, 0]][:, a_pix] & frame_ok[pairs[:, 1]][:, a_pix] & ~gated
+             & active_pairs(n, dn, pairs))
     uniq, tid = np.unique(tile_ids(b_pix, width, tile), return_inverse=True)
     return PairData(torch.as_tensor(np.log(np.maximum(sens[:, a_pix], 1e-12)), dtype=torch.float32),
                     torch.as_tensor(n), torch.as_tensor(pairs), torch.as_tensor(dn), torch.as_tensor(valid),

@@ -118,6 +118,7 @@ from fusiongs.frames.frameset import FrameSet
 
 PIXEL_MODELS = ("auto", "step", "reset")  # CalibrateOptions.pixel_model
 RATIO_SOURCES = ("iv", "round_trip", "auto")  # CalibrateOptions.ratio
+OWN_GATE_FALLBACK = "pixel (the neighbours' gate left no measurement)"  # per_channel refractory_gate
 
 @dataclass(frozen=True)
 class CalibrateOptions:
@@ -387,7 +388,7 @@ def _model_fit(frames: FrameSet, lin: np.ndarray | None, events: EventStream, ho
             data = prepare_channel(sens, counts, between, sel, fast, frame_ok, events.width,
                                    opts.tile, _pair_gap(opts), neigh)
             res = search_both(data, opts, rng)
-            gate = "pixel (the neighbours' gate left no measurement)"
+            gate = OWN_GATE_FALLBACK
             fallback = True
             res["neighbour_gate_fit"] = near
         out_p.append(res["theta_pos"])
@@ -512,7 +513,7 @@ def estimate_thresholds(frames: FrameSet, events: EventStream,
     # The bootstrap sees the tiles' scatter, not the fit's biases: add the systematic part.
     details["std_bootstrap"] = {"std_pos": [float(v) for v in sp], "std_neg": [float(v) for v in sn]}
     fell = [names[c] for c, p in enumerate(per) if p["gate_fallback"]]
-    own = [names[c] for c, p in enumerate(per) if p["refractory_gate"].startswith("pixel (")]
+    own = [names[c] for c, p in enumerate(per) if p["refractory_gate"] == OWN_GATE_FALLBACK]
     systematic = (opts.systematic_own_gate if own else opts.systematic_fallback) if fell else opts.systematic
     details["systematic"] = systematic
     if fell:

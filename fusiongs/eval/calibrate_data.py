@@ -75,6 +75,20 @@ def frame_pairs(n_frames: int, max_gap: int) -> np.ndarray:
                     dtype=np.int64).reshape(-1, 2)
 
 
+def pair_sums(per_gap: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """``[Q, ...]`` sums over the consecutive mid-exposure gaps each frame pair spans, from
+    ``[F-1, ...]`` per-gap values (a cumulative sum; the result keeps ``per_gap``'s dtype kind)."""
+    cum = np.concatenate([np.zeros((1, *per_gap.shape[1:]), per_gap.dtype), np.cumsum(per_gap, axis=0)])
+    return cum[pairs[:, 1]] - cum[pairs[:, 0]]
+
+
+def active_pairs(n: np.ndarray, dn: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """``[Q, P]`` bool: the pixel fired between the pair's mid-exposures or inside either exposure
+    (``n``: ``[F, M, 2, P]`` counts inside the exposures; ``dn``: ``[Q, 2, P]`` between)."""
+    moved = np.abs(n).sum((1, 2))  # [F, P] events inside each exposure
+    return (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
+
+
 def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndarray, pix: np.ndarray,
                     bad_pair: np.ndarray, frame_ok: np.ndarray, width: int, tile: int,
                     max_gap: int = 1,
@@ -97,18 +111,12 @@ def prepare_channel(sens: np.ndarray, counts: list[np.ndarray], between: np.ndar
     log_s = np.log(np.maximum(sens[:, pix], 1e-12))
     n = np.stack([c[..., pix] for c in counts]).astype(np.float32)
     pairs = frame_pairs(f, max_gap)
-    cum = np.concatenate([np.zeros((1, 2, pix.size), np.float32),
-                          np.cumsum(between[..., pix].astype(np.float32), axis=0)])
-    dn = cum[pairs[:, 1]] - cum[pairs[:, 0]]  # [Q, 2, P]
-    bad_cum = np.concatenate([np.zeros((1, pix.size), np.int32), np.cumsum(bad_pair[:, pix], axis=0)])
-    bad = (bad_cum[pairs[:, 1]] - bad_cum[pairs[:, 0]]) > 0
-    moved = np.abs(n).sum((1, 2))  # [F] events inside each exposure
-    active = (dn.sum(1) + moved[pairs[:, 0]] + moved[pairs[:, 1]]) > 0
-    valid = frame_ok[pairs[:, 0]][:, pix] & frame_ok[pairs[:, 1]][:, pix] & ~bad & active
+    dn = pair_sums(between[..., pix].astype(np.float32), pairs)  # [Q, 2, P]
+    bad = pair_sums(bad_pair[:, pix].astype(np.int32), pairs) > 0
+    valid = (frame_ok[pairs[:, 0]][:, pix] & frame_ok[pairs[:, 1]][:, pix] & ~bad
+             & active_pairs(n, dn, pairs))
     uniq, tid = np.unique(tile_ids(pix, width, tile), return_inverse=True)
-    zc = np.concatenate([np.zeros((1, 2, pix.size), np.float32),
-                         np.cumsum(neighbours[..., pix].astype(np.float32), axis=0)])
-    z = zc[pairs[:, 1]] - zc[pairs[:, 0]]
+    z = pair_sums(neighbours[..., pix].astype(np.float32), pairs)
     return PairData(torch.as_tensor(log_s, dtype=torch.float32), torch.as_tensor(n),
                     torch.as_tensor(pairs), torch.as_tensor(dn), torch.as_tensor(valid),
                     torch.as_tensor(tid.astype(np.int64)), int(uniq.size),
