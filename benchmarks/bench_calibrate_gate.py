@@ -34,6 +34,15 @@ Two more move the own gate's selection off the fitted pixel (:func:`instrument_g
   independent of ``A``'s (it is, on an ideal sensor), so on the twin this row should read near
   the truth where ``twin, own gate`` reads high; on the scene it keeps ``A``'s lost crossings.
 
+Two more gate each pixel pair on something no pixel's counts carry (:func:`true_rate_fast`):
+
+- ``scene, true-rate gate`` / ``twin, true-rate gate``: a pixel is left out of a pair where the
+  simulator's true log intensity at that pixel (its render instants, linear in between) changes
+  by more than ``RATE_FACTOR`` thresholds within one gap somewhere in the pair. It selects on the
+  image's speed alone, not on a count, and it also catches the edges that leave a single event,
+  which no interval shows. It is an oracle, not an estimator: it tells how far the best gate on
+  the image's speed gets, i.e. how much of an error is the choice of the pairs.
+
 Simulated scenes only (the truth and the simulator's configuration are read). The gate is swapped
 in this process only (:func:`estimate_with_gate`); no production code path changes.
 
@@ -157,13 +166,63 @@ def own_gate_on_instrument(height: int, step: int):
         calibrate.prepare_channel = saved
 
 
+RATE_FACTOR = 1.5  # true-rate gate: thresholds crossed within one gap (2 = crossings one dead time apart)
+
+
+def true_rate_fast(times: np.ndarray, logs: np.ndarray, t_start: np.ndarray, t_end: np.ndarray,
+                   gap_us: float, theta_on: float, theta_off: float,
+                   factor: float = RATE_FACTOR) -> np.ndarray:
+    """``[F-1, H*W]`` bool: somewhere between frame ``i``'s exposure start and frame ``i+1``'s
+    exposure end, the pixel's true log intensity rises faster than ``factor * theta_on`` or falls
+    faster than ``factor * theta_off`` per ``gap_us`` microseconds.
+
+    Args:
+        times: ``[K]`` s, the simulator's render instants; logs: ``[K, H*W]`` the log intensity
+            each pixel sees there (linear in between, as the simulator's DVS model takes it).
+        t_start, t_end: ``[F]`` s, the frames' exposures. gap_us: the refractory gate's gap (µs).
+        theta_on, theta_off: the thresholds (log units). factor: see ``RATE_FACTOR``.
+    """
+    rate = np.diff(logs, axis=0) / np.diff(times)[:, None]  # [K-1, P] log / s, constant per interval
+    g = gap_us * 1e-6
+    over = (rate * g > factor * theta_on) | (-rate * g > factor * theta_off)
+    cum = np.concatenate([np.zeros((1, over.shape[1]), np.int64), np.cumsum(over, axis=0)])
+    # interval j = [times[j], times[j+1]] overlaps (a, b) when times[j+1] > a and times[j] < b
+    first = np.searchsorted(times[1:], np.asarray(t_start[:-1]), side="right")
+    last = np.searchsorted(times[:-1], np.asarray(t_end[1:]), side="left")
+    return (cum[last] - cum[first]) > 0
+
+
+@contextlib.contextmanager
+def gate_mask(fast_of_gap, floor_events: EventStream | None = None, jump: float = 5.0):
+    """Within the block, :func:`estimate_thresholds`'s refractory gate leaves out the pixel pairs
+    ``fast_of_gap(gap_us)`` (``[F-1, H*W]`` bool) marks, the pixel's own only (every fallback sees
+    the same mask); the dead time (and with it the gap) is the fitted stream's, or the interval
+    floor of ``floor_events`` (histogram jump ``jump``) when given."""
+    saved = calibrate.gate_inputs, calibrate.interval_floor
+    if floor_events is not None:
+        floor = interval_floor(floor_events, jump)
+        calibrate.interval_floor = lambda _ev, _jump: floor
+
+    def inputs(frames, events, opts, dead):
+        gap, _, _ = gate_inputs(frames, events, opts, dead)
+        fast = fast_of_gap(gap)
+        return gap, fast, fast.copy()
+
+    calibrate.gate_inputs = inputs
+    try:
+        yield
+    finally:
+        calibrate.gate_inputs, calibrate.interval_floor = saved
+
+
 def errors(est, truth) -> np.ndarray:
     """Relative errors ``[2 C]`` (ON per channel, then OFF per channel)."""
     return np.concatenate(relative_errors(est, truth))
 
 
 def rows(scene: Path, twin: Path) -> list[dict]:
-    """The nine estimates of the module docstring on ``scene`` and its ``twin``."""
+    """The eleven estimates of the module docstring on ``scene`` and its ``twin``."""
+    from benchmarks.bench_event_only_diagnose import true_logs
     from fusiongs.eval.truth import true_thresholds
     from fusiongs.io.scene_io import load_scene
 
@@ -176,6 +235,16 @@ def rows(scene: Path, twin: Path) -> list[dict]:
             return run()
 
     own = replace(step, refractory_self=True, refractory_radius=0)  # the pixel's own gate only
+    facts = json.loads((scene / "gt" / "sim.json").read_text())
+    times, logs = true_logs(scene)  # the twin's images are the scene's
+
+    def true_rate(fit_events, floor_events=None):
+        def fast(gap):
+            return true_rate_fast(times, logs, sc.frames.t_start, sc.frames.t_end, gap,
+                                  facts["theta_on"], facts["theta_off"])
+        with gate_mask(fast, floor_events, own.dead_time_jump):
+            return estimate_thresholds(sc.frames, fit_events, own)
+
     runs = [("scene", lambda: estimate_thresholds(sc.frames, sc.events, CalibrateOptions())),
             ("scene, step", lambda: estimate_thresholds(sc.frames, sc.events, step)),
             ("twin, no gate", lambda: estimate_thresholds(sc.frames, tw.events, step)),
@@ -189,7 +258,9 @@ def rows(scene: Path, twin: Path) -> list[dict]:
              lambda: on_instrument(lambda: estimate_thresholds(sc.frames, sc.events, own))),
             ("twin, own gate on the instrument",
              lambda: on_instrument(lambda: estimate_with_gate(sc.frames, tw.events, tw.events, own,
-                                                              floor_events=sc.events)))]
+                                                              floor_events=sc.events))),
+            ("scene, true-rate gate", lambda: true_rate(sc.events)),
+            ("twin, true-rate gate", lambda: true_rate(tw.events, sc.events))]
     out = []
     for name, run in runs:
         est = run()

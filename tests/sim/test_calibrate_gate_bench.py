@@ -10,9 +10,11 @@ import pytest
 import fusiongs.eval.calibrate as calibrate
 from benchmarks.bench_calibrate_gate import (
     estimate_with_gate,
+    gate_mask,
     instrument_gated_pairs,
     main,
     own_gate_on_instrument,
+    true_rate_fast,
 )
 from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
 from fusiongs.eval.calibrate_data import count_inputs, frame_pairs, gate_inputs, saturated, sensor_intensity
@@ -156,6 +158,56 @@ def test_the_own_gate_on_the_instrument_is_swapped_in_and_undone(scene):
     assert moved.theta_pos[0] != plain.theta_pos[0]
     np.testing.assert_array_equal(still_off.theta_pos, off.theta_pos)
     np.testing.assert_array_equal(still_off.theta_neg, off.theta_neg)
+
+
+def test_true_rate_fast_marks_each_pair_by_its_fastest_interval():
+    """Against a loop over pairs, pixels and render intervals: an interval counts for a pair when
+    it overlaps the span from the first frame's exposure start to the second's end (frame
+    boundaries on render instants included), ON and OFF each against their own threshold."""
+    rng = np.random.default_rng(3)
+    times = np.arange(61) * 1e-3  # 1 ms renders
+    steps = rng.normal(0.0, 0.02, (60, 40))
+    steps[rng.random((60, 40)) < 0.02] = 0.3  # a few fast rises
+    steps[rng.random((60, 40)) < 0.03] = -0.2  # falls fast for ON, not for OFF (0.36 vs 0.3 / 0.45)
+    steps[:, :2] = 0.0
+    steps[29, 0] = 0.5  # [29, 30] ms: ends where pair 2's span starts (not in it), inside pair 1's
+    steps[24, 1] = -0.5  # [24, 25] ms: starts where pair 0's span ends (not in it)
+    logs = np.concatenate([np.zeros((1, 40)), np.cumsum(steps, axis=0)])
+    t_start = np.array([0.0, 15.5, 30.0, 45.5]) * 1e-3  # two ends on render instants
+    t_end = np.array([4.0, 24.0, 40.0, 50.0]) * 1e-3
+    gap_us, on, off, factor = 1800.0, 0.2, 0.3, 1.5
+    got = true_rate_fast(times, logs, t_start, t_end, gap_us, on, off, factor)
+    want = np.zeros((3, 40), bool)
+    for i in range(3):
+        a, b = t_start[i], t_end[i + 1]
+        for p in range(40):
+            for j in range(60):
+                if times[j + 1] > a and times[j] < b:
+                    r = (logs[j + 1, p] - logs[j, p]) / (times[j + 1] - times[j]) * gap_us * 1e-6
+                    want[i, p] |= r > factor * on or -r > factor * off
+    assert want.any() and not want.all()
+    assert want[:, 0].tolist() == [False, True, False] and want[:, 1].tolist() == [False, True, False]
+    np.testing.assert_array_equal(got, want)
+
+
+def test_gate_mask_swaps_the_gate_in_and_out(scene):
+    """A mask that marks nothing fits every pair (the gate-off estimate); the pixel's own fast
+    events as the mask give the own gate's estimate; the gate inputs and floor are restored."""
+    own = replace(STEP, refractory_self=True, refractory_radius=0)
+    saved = calibrate.gate_inputs, calibrate.interval_floor
+    off = estimate_thresholds(scene.frames, scene.events, replace(own, refractory_gate=0.0))
+    plain = estimate_thresholds(scene.frames, scene.events, own)
+    shape = (len(scene.frames) - 1, scene.events.width * scene.events.height)
+    with gate_mask(lambda gap: np.zeros(shape, bool)):
+        none = estimate_thresholds(scene.frames, scene.events, own)
+    with gate_mask(lambda gap: gate_inputs(scene.frames, scene.events, own, gap / own.refractory_gate)[1]):
+        same = estimate_thresholds(scene.frames, scene.events, own)
+    assert (calibrate.gate_inputs, calibrate.interval_floor) == saved
+    np.testing.assert_array_equal(none.theta_pos, off.theta_pos)
+    np.testing.assert_array_equal(none.theta_neg, off.theta_neg)
+    np.testing.assert_array_equal(same.theta_pos, plain.theta_pos)
+    np.testing.assert_array_equal(same.theta_neg, plain.theta_neg)
+    assert none.details["per_channel"][0]["kept"] > plain.details["per_channel"][0]["kept"]
 
 
 def test_a_scene_without_truth_is_refused_in_one_line(tmp_path, capsys):
