@@ -81,7 +81,12 @@ losses it cannot see: RESULTS.md, sessions 58-59). Three causes are known:
 the reference level's lag (depth and gallery scenes read +2..+5 %), the gate keeping only slow
 pixel pairs (long-dead-time walls read low), and the pixel's own gate in dark colour scenes.
 benchmarks/RESULTS.md ("Where the estimator's remaining errors come from") lists them with every
-remedy measured and refuted so far; look there before trying one.
+remedy measured and refuted so far; look there before trying one. What the corner lacks is known:
+a gate on the image's true speed at each pixel (an oracle from the simulator's log intensity,
+``benchmarks/bench_calibrate_gate.py``'s "true-rate gate") puts all 39 corner tuning scenes within
+10 % (rms log error 0.027 against 0.097), so the error is which pixel pairs the gate keeps, and a
+millisecond-scale speed that no pixel's own counts carry would mend it; neither the frames (with
+optical flow) nor the frames-only warm-up's renders give it well enough (RESULTS.md, session 60).
 """
 
 from __future__ import annotations
