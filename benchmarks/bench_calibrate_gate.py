@@ -77,18 +77,29 @@ from fusiongs.frames.frameset import FrameSet  # noqa: E402
 
 
 @contextlib.contextmanager
+def _swapped(inputs=None, floor=None):
+    """Within the block, :func:`estimate_thresholds` calls ``inputs`` instead of
+    :func:`~fusiongs.eval.calibrate_data.gate_inputs` and takes ``floor`` as the interval floor of
+    the stream it fits (each only when given); both are restored after it."""
+    saved = calibrate.gate_inputs, calibrate.interval_floor
+    if inputs is not None:
+        calibrate.gate_inputs = inputs
+    if floor is not None:
+        calibrate.interval_floor = lambda _ev, _jump: floor
+    try:
+        yield
+    finally:
+        calibrate.gate_inputs, calibrate.interval_floor = saved
+
+
+@contextlib.contextmanager
 def gate_from(events: EventStream, jump: float, floor_events: EventStream | None = None):
     """Within the block, :func:`estimate_thresholds` takes its dead time (the interval floor of
     ``floor_events``, by default ``events``) and its refractory gate from ``events`` instead of the
     stream it fits."""
     floor = interval_floor(events if floor_events is None else floor_events, jump)
-    saved = calibrate.gate_inputs, calibrate.interval_floor
-    calibrate.gate_inputs = lambda frames, _ev, opts, dead: gate_inputs(frames, events, opts, dead)
-    calibrate.interval_floor = lambda _ev, _jump: floor
-    try:
+    with _swapped(lambda frames, _ev, opts, dead: gate_inputs(frames, events, opts, dead), floor):
         yield
-    finally:
-        calibrate.gate_inputs, calibrate.interval_floor = saved
 
 
 def estimate_with_gate(frames: FrameSet, events: EventStream, gate_events: EventStream,
@@ -198,21 +209,13 @@ def gate_mask(fast_of_gap, floor_events: EventStream | None = None, jump: float 
     ``fast_of_gap(gap_us)`` (``[F-1, H*W]`` bool) marks, the pixel's own only (every fallback sees
     the same mask); the dead time (and with it the gap) is the fitted stream's, or the interval
     floor of ``floor_events`` (histogram jump ``jump``) when given."""
-    saved = calibrate.gate_inputs, calibrate.interval_floor
-    if floor_events is not None:
-        floor = interval_floor(floor_events, jump)
-        calibrate.interval_floor = lambda _ev, _jump: floor
-
     def inputs(frames, events, opts, dead):
         gap, _, _ = gate_inputs(frames, events, opts, dead)
         fast = fast_of_gap(gap)
         return gap, fast, fast.copy()
 
-    calibrate.gate_inputs = inputs
-    try:
+    with _swapped(inputs, None if floor_events is None else interval_floor(floor_events, jump)):
         yield
-    finally:
-        calibrate.gate_inputs, calibrate.interval_floor = saved
 
 
 def errors(est, truth) -> np.ndarray:

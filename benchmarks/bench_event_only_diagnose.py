@@ -73,7 +73,10 @@ def true_logs(scene: Path) -> tuple[np.ndarray, np.ndarray]:
     render = scene_renderer(cfg).render
     times = np.linspace(0.0, cfg.duration, int(round(cfg.duration * cfg.dvs_rate_hz)) + 1)
     logs = np.stack([dvs.sensor_log(render(float(t)), cfg.cfa, cfg.dvs.eps) for t in times])
-    np.savez(cache, times=times, logs=logs)
+    from fusiongs.atomic import atomic_path
+
+    with atomic_path(cache) as tmp:  # a run stopped midway leaves no half-written cache
+        np.savez(tmp, times=times, logs=logs)
     return times, logs
 
 
