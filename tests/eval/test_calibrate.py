@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -523,6 +524,35 @@ def test_a_gate_that_fell_back_widens_the_uncertainty_and_warns(grey_asym):
         for bad in (-0.01, float("nan"), None):
             with pytest.raises(InputError, match=name):
                 estimate_thresholds(sc.frames, sc.events, CalibrateOptions(**{name: bad}))
+
+
+def test_a_gate_that_keeps_few_pixel_pairs_widens_the_uncertainty_and_warns(grey_asym):
+    sc = grey_asym.scene
+    base = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(bootstrap=50))
+    ch = base.details["per_channel"][0]
+    assert 0.0 < ch["gate_keep"] < 1.0 and not ch["gate_sparse"]  # the gate left some pairs out
+    assert base.details["systematic"] == 0.04 and "warnings" not in base.details
+    # a bar above what the gate kept: the same estimate, flagged, with the fallback's systematic part
+    bar = CalibrateOptions(bootstrap=50, min_gate_keep=min(1.0, 1.01 * ch["gate_keep"]))
+    few = estimate_thresholds(sc.frames, sc.events, bar)
+    assert few.details["per_channel"][0]["gate_sparse"] and few.details["systematic"] == 0.12
+    np.testing.assert_allclose(few.theta_pos, base.theta_pos)
+    np.testing.assert_allclose(few.theta_neg, base.theta_neg)
+    boot = few.details["std_bootstrap"]
+    np.testing.assert_allclose(few.std_pos, np.hypot(boot["std_pos"], 0.12 * few.theta_pos))
+    (warning,) = few.details["warnings"]
+    assert f"kept only {100 * ch['gate_keep']:.1f} % of the pixel pairs on channel(s) grey" in warning
+    assert "12 %" in warning
+    # just below what it kept: not flagged
+    at = estimate_thresholds(sc.frames, sc.events, replace(bar, min_gate_keep=0.99 * ch["gate_keep"]))
+    assert not at.details["per_channel"][0]["gate_sparse"] and at.details["systematic"] == 0.04
+    # no gate, nothing to keep or flag
+    off = estimate_thresholds(sc.frames, sc.events, CalibrateOptions(refractory_gate=0.0, bootstrap=0,
+                                                                     min_gate_keep=1.0))
+    assert off.details["per_channel"][0]["gate_keep"] is None and off.details["systematic"] == 0.04
+    for bad in (-0.01, float("nan"), None, "0.03"):
+        with pytest.raises(InputError, match="min_gate_keep"):
+            estimate_thresholds(sc.frames, sc.events, CalibrateOptions(min_gate_keep=bad))
 
 
 def test_cli_prints_the_calibration_warnings(grey_dir, tmp_path, capsys, monkeypatch):
