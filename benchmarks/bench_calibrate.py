@@ -32,9 +32,10 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numpy as np  # noqa: E402
 
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds  # noqa: E402
-from fusiongs.eval.truth import read_sim_facts, true_thresholds  # noqa: E402
+from fusiongs.calibrate.estimate import estimate_thresholds  # noqa: E402
+from fusiongs.calibrate.options import CalibrateOptions  # noqa: E402
 from fusiongs.io.scene_io import load_scene  # noqa: E402
+from fusiongs.io.truth import read_sim_facts, true_thresholds  # noqa: E402
 from fusiongs.sim.simulate import run_simulation  # noqa: E402
 from fusiongs.sim.sweep import sweep_scene_config  # noqa: E402
 from fusiongs.sim.write import write_simulated_scene  # noqa: E402
@@ -52,11 +53,17 @@ def parse_seeds(text: str) -> list[int]:
     return out
 
 
-def scene_for(root: Path, seed: int, split: str) -> Path:
-    """The sweep scene of ``seed`` under ``root`` (simulated on first use)."""
-    path = root / f"{split}_{seed}"
+def scene_for(root: Path, seed: int, split: str, smoke: bool = False) -> Path:
+    """The sweep scene of ``seed`` under ``root`` (simulated on first use); with ``smoke``, shrunk
+    by :data:`benchmarks._sweep.SMOKE_SCENE` (CI's smoke run only)."""
+    path = root / (f"{split}_{seed}" + ("_smoke" if smoke else ""))
     if not (path / "scene.json").is_file():
-        res = run_simulation(sweep_scene_config(seed, split))
+        cfg = sweep_scene_config(seed, split)
+        if smoke:
+            from benchmarks._sweep import smoke_config
+
+            cfg = smoke_config(cfg)
+        res = run_simulation(cfg)
         write_simulated_scene(res.scene, res.gt, path, stats=res.stats, overwrite=True)
     return path
 
@@ -69,7 +76,7 @@ def relative_errors(est, truth) -> tuple[np.ndarray, np.ndarray]:
 
 def calibrate_row(scene_dir: Path, opts: CalibrateOptions, refine_cfg=None) -> dict:
     """Estimate on one scene: truth, estimate, relative errors and seconds; with ``refine_cfg`` (a
-    deblur config) also the refined estimate (:func:`fusiongs.train.refine.refine_calibration`)."""
+    deblur config) also the refined estimate (:func:`fusiongs.pipeline.refine.refine_calibration`)."""
     scene = load_scene(scene_dir)
     t0 = time.perf_counter()
     est = estimate_thresholds(scene.frames, scene.events, opts)
@@ -79,7 +86,7 @@ def calibrate_row(scene_dir: Path, opts: CalibrateOptions, refine_cfg=None) -> d
     err_p, err_n = relative_errors(est, truth)
     refined = None
     if refine_cfg is not None:
-        from fusiongs.train.refine import refine_calibration
+        from fusiongs.pipeline.refine import refine_calibration
 
         t1 = time.perf_counter()
         ref = refine_calibration(scene, est, refine_cfg, scene_dir, log=lambda *_: None)
@@ -188,6 +195,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--refine", action="store_true",
                     help="also the refined estimate (calibrate --refine, with --config and overrides)")
     ap.add_argument("--json", default=None, help="write all rows to this JSON file")
+    ap.add_argument("--smoke", action="store_true",
+                    help="tiny scenes (benchmarks/smoke.sh: checks the script runs; no figures)")
     ap.add_argument("overrides", nargs="*", help="deblur config overrides key=value")
     args = ap.parse_args(argv)
     root = Path(args.root)
@@ -199,12 +208,12 @@ def main(argv: list[str] | None = None) -> int:
         opts = type(opts)(**{**opts.__dict__, k: val})
     refine_cfg = None
     if args.refine:
-        from fusiongs.train.pipeline import resolve_config
+        from fusiongs.pipeline.deblur import resolve_config
 
         refine_cfg = resolve_config(args.config, ["output.progress=false", *args.overrides])
     rows = []
     for seed in parse_seeds(args.seeds):
-        path = scene_for(root / "scenes", seed, args.split)
+        path = scene_for(root / "scenes", seed, args.split, args.smoke)
         row = calibrate_row(path, opts, refine_cfg)
         if args.deblur:
             row["deblur"] = deblur_row(path, root / "runs" / path.name, args.config, args.overrides)

@@ -1,6 +1,6 @@
 """Time of ``fusiongs calibrate``'s estimator with the pixel model chosen by the frames ("auto": the
 pixel model test, then one fit, where the recording has frames and an onset) against one fit with the
-model given ("step", the reference) on the same scene, measured in the same run (issue 13's
+model given ("step", the reference) on the same scene, measured in the same run (the
 target: an 8 M-event 173x130 scene in <= 30 s on 2 CPU cores).
 
     PYTHONPATH=. python benchmarks/bench_calibrate_speed.py SCENE [--reps 3]
@@ -17,7 +17,8 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds  # noqa: E402
+from fusiongs.calibrate.estimate import estimate_thresholds  # noqa: E402
+from fusiongs.calibrate.options import CalibrateOptions  # noqa: E402
 from fusiongs.io.scene_io import load_scene  # noqa: E402
 
 

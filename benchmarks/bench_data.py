@@ -7,8 +7,8 @@ seconds, the target, and a reference measured in the same run (plain h5py reads 
 ``np.loadtxt`` timed on 1/20 of the lines and scaled up). Cases are a list: add one by appending a
 :class:`Case`.
 
-The ``.raw`` table (default file: the EVT3 recording of ``../shared/data/real``, when present) runs
-each reader in its own process: best-of-``repeat`` seconds, and the peak resident memory
+The ``.raw`` table (default file: the EVT3 recording in shared/data/real beside the repository,
+when present) runs each reader in its own process: best-of-``repeat`` seconds, and the peak resident memory
 (``ru_maxrss``) above the process's level after its imports, next to the size of the returned
 stream's arrays.
 
@@ -49,7 +49,7 @@ W, H = 346, 260
 REAL_EVT3 = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "prophesee_evt3_1280x720.raw"
 RAW_READERS = {
     "faery, chunk by chunk (fusiongs)": "fusiongs.events.readers.prophesee:read_prophesee_raw",
-    "numpy, whole file (former)": "fusiongs.events.readers._evt_reference:read_prophesee_raw_numpy",
+    "numpy, whole file (former)": "tests.reference.evt_decoder:read_prophesee_raw_numpy",
 }
 
 

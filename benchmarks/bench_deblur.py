@@ -26,10 +26,10 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import torch  # noqa: E402
 
+from fusiongs.configs.load import to_dict  # noqa: E402
+from fusiongs.pipeline.deblur import resolve_config, run_deblur  # noqa: E402
 from fusiongs.sim.simulate import SimConfig, run_simulation  # noqa: E402
 from fusiongs.sim.write import write_simulated_scene  # noqa: E402
-from fusiongs.train.config import to_dict  # noqa: E402
-from fusiongs.train.pipeline import resolve_config, run_deblur  # noqa: E402
 
 ABLATIONS = {
     "no events": ["events.enabled=false"],
@@ -46,12 +46,16 @@ COLOUR_ABLATIONS = {"mask": ["events.colour_mode=mask"], "demosaic": ["events.co
 
 
 def scene_for(root: Path, preset: str, seed: int, cfa: str | None, args) -> Path:
-    name = f"{preset}_s{seed}_{cfa or 'grey'}_{args.size}"
+    name = f"{preset}_s{seed}_{cfa or 'grey'}_{'smoke' if args.smoke else args.size}"
     path = root / "scenes" / name
     if not (path / "scene.json").is_file():
         w, h = (int(v) for v in args.size.split("x"))
         cfg = SimConfig(preset=preset, width=w, height=h, duration=1.0, frames=12, exposure=0.06,
                         cfa=cfa, seed=seed, events_target=args.events or None)
+        if args.smoke:  # CI's smoke run: a tiny scene, no figures
+            from benchmarks._sweep import smoke_config
+
+            cfg = smoke_config(cfg)
         res = run_simulation(cfg)
         write_simulated_scene(res.scene, res.gt, path, stats=res.stats, overwrite=True)
     return path
@@ -80,7 +84,7 @@ def settings_key(config: str, overrides: list[str]) -> str:
 
 
 def mean_row(results: dict) -> tuple[str, list[str]]:
-    """The mean over runs and the issue's quality targets checked on it."""
+    """The mean over runs and the quality targets checked on it."""
     def m(getter):
         vals = [getter(r) for r in results.values()]
         return sum(vals) / len(vals)
@@ -138,6 +142,8 @@ def main(argv=None) -> int:
     p.add_argument("--ablation", action="store_true")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--reuse", action="store_true", help="read back finished runs with the same settings")
+    p.add_argument("--smoke", action="store_true",
+                   help="tiny scenes (benchmarks/smoke.sh: checks the script runs; no figures)")
     p.add_argument("overrides", nargs="*", help="config overrides for every run")
     args = p.parse_args(argv)
     torch.set_num_threads(args.threads)

@@ -22,7 +22,7 @@ and backend, the PSNR figures of ``metrics.json`` and the log's last lines.
 (``fusiongs.train.trainer.train``, outputs not written) under ``torch.profiler`` and prints the
 operators that take the most host time and, on CUDA, device time, over ``--steps`` iterations
 after the first ``--skip`` (the profiler steps with each call of the trainer's ``training_step``,
-so set-up is left out). Where the time of a GPU iteration goes (session 20: 22 ms at half
+so set-up is left out). Where the time of a GPU iteration goes (H200: 22 ms at half
 resolution, 36 ms at full, for a few ms of rasterisation).
 
     PYTHONPATH=. python benchmarks/bench_gpu.py render
@@ -175,7 +175,7 @@ def profile_training(scene_path: str, overrides: list[str], skip: int, steps: in
 
     import fusiongs.train.trainer as trainer
     from fusiongs.io import load_scene
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
 
     cfg = resolve_config(config, ["output.progress=false", "output.checkpoint_every=0",
                                 f"optim.iterations={skip + steps + 1}", *overrides])

@@ -12,7 +12,7 @@
 # run; TORCH_RUN=1 instead trains test seed 1000 fully with the pure-torch backend on CUDA); then
 # the CUDA tests, three runs with gsplat (test seed 1000 at 173x130, the real 346x260 recording, an
 # event-only 173x130 RGGB scene: tuning seed 6, as timed on the CPU) and the rasteriser benchmark
-# (gsplat against torch). Session 20 (H200) took 570 s with TORCH_RUN=1 and missed the last two.
+# (gsplat against torch). On an H200 with TORCH_RUN=1 it took 570 s and missed the last two.
 set -u
 WHEELS=${1:?wheels folder}
 CUPS=${2:?posed eslnet_cups scene}
@@ -71,7 +71,7 @@ EOF
 
 mkdir -p "$WORK/runs"
 B="python3 benchmarks/bench_gpu.py"
-if [ "${TORCH_RUN:-0}" = 1 ]; then  # the pure-torch backend on CUDA (session 20: 110 s, 33.23 dB)
+if [ "${TORCH_RUN:-0}" = 1 ]; then  # the pure-torch backend on CUDA (H200: 110 s, 33.23 dB)
   step "s1000 torch backend (gsplat building beside it)" 240 \
     $B deblur s1000_torch "$WORK/s1000" "$WORK/runs/s1000_torch" -- device=$DEV $EXTRA backend=torch
 else  # a 2-iteration run fills numba's cache, so that the timed runs are a user's second run

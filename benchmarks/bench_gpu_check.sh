@@ -1,18 +1,18 @@
 #!/usr/bin/env bash
 # The CUDA tests and the end-to-end GPU timings in one call on a bare machine with an NVIDIA GPU,
-# nvcc and torch (benchmarks/RESULTS.md, "The GPU path after the low-pass term", session 27):
+# nvcc and torch (benchmarks/RESULTS.md, "The GPU path after the low-pass term"):
 #   OUT=folder bash benchmarks/bench_gpu_check.sh WHEELS
 # WHEELS: a folder of wheels the machine lacks (gsplat 1.5.3, kornia, kornia-rs, colour-science,
 # imageio-ffmpeg), installed with --no-deps into /tmp/site. Steps: gsplat's CUDA extension builds
 # in the background while test seed 1000 and tuning seed 6 (event-only, 173x130) are simulated;
 # a 2-iteration run then fills numba's on-disk cache (without it every later process compiles
-# the kernels itself and the steps below overrun their limits: session 27's second call);
+# the kernels itself and the steps below overrun their limits);
 # the CUDA tests; the low-pass term against its pair-by-pair reference on the GPU; the two
-# default runs. Session 27 (H200): about 400 s; session 31: 476 s.
+# default runs. About 400 s on an H200; 476 s in a later run.
 #
 # REPEAT=1 in a second call on the same warm machine (the first call's /tmp/site and /tmp/w still
 # there) runs only the two default runs again, in the other order (event-only first), so that the
-# per-step ratio of the two paths is measured twice with the order effect balanced (session 32).
+# per-step ratio of the two paths is measured twice with the order effect balanced.
 set -u
 WHEELS=${1:?wheels folder}
 OUT=${OUT:?output folder}

@@ -1,7 +1,7 @@
 """The strongest EDI peer on a recording without truth: EDI carried to held-out frames, best thresholds.
 
 On a real recording nothing knows the true thresholds, so the honest EDI peer of the held-out score
-(:mod:`fusiongs.eval.holdout`, METHOD.md §6a) is EDI at the thresholds that predict the held-out
+(:mod:`fusiongs.eval.holdout`, docs/method.md §6a) is EDI at the thresholds that predict the held-out
 blurry frames best. For every ``(theta_+, theta_-)`` of a grid, each held-out frame is predicted as
 ``fusiongs deblur --holdout K`` predicts it (the kept neighbours EDI-deblurred, carried with the
 events to the held-out exposure, averaged in linear light, encoded by the frames' response) and
@@ -12,7 +12,7 @@ kept frames (what ``heldout.json`` reports as ``edi_carried``), and the nearest 
 The counts do not depend on the thresholds: they are taken once, and each grid cell costs only the
 exponentials.
 
-    PYTHONPATH=. python benchmarks/bench_holdout_edi_grid.py ../shared/data/real/eslnet_cups \
+    PYTHONPATH=. python benchmarks/bench_holdout_edi_grid.py path/to/eslnet_cups \
         --holdout 5 [--grid 0.15,0.2,...] [--json F]
 """
 
@@ -26,14 +26,14 @@ import time
 import numpy as np
 
 from fusiongs.atomic import write_text
+from fusiongs.calibrate.estimate import estimate_thresholds
+from fusiongs.edi import EDI_SAMPLES, edi_ratio, event_count_samples
 from fusiongs.errors import FusionGSError, InputError
-from fusiongs.eval.calibrate import estimate_thresholds
-from fusiongs.eval.edi import EDI_SAMPLES, edi_ratio, event_count_samples
 from fusiongs.eval.holdout import carried_counts, frame_subset, kept_neighbours, nearest_kept
 from fusiongs.eval.metrics import psnr
 from fusiongs.frames.response import linear_to_response
 from fusiongs.io.scene_io import load_scene
-from fusiongs.train.pipeline import resolve_config, split_holdout
+from fusiongs.pipeline.deblur import resolve_config, split_holdout
 
 GRID = (0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.75)
 
@@ -44,7 +44,7 @@ def held_out_scores(scene, held, kept, thetas, n_edi: int = EDI_SAMPLES, n_carry
 
     Args:
         scene: a scene with frames and events.
-        held, kept: frame indices (:func:`fusiongs.train.pipeline.split_holdout`).
+        held, kept: frame indices (:func:`fusiongs.pipeline.deblur.split_holdout`).
         thetas: ``[T]`` ``(theta_+, theta_-)`` pairs (log units) or threshold objects.
         n_edi: instants of each neighbour's EDI (``fusiongs deblur`` uses the default).
         n_carry: instants of the held-out exposure; None: the default config's ``blur.n_samples``,

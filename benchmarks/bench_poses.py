@@ -1,13 +1,13 @@
 """The pose stage on simulated scenes whose trajectory (and optionally intrinsics) is withheld.
 
-Issue 14's target: "poses within 1 % of the scene extent and 0.5° after similarity alignment,
+The target: "poses within 1 % of the scene extent and 0.5° after similarity alignment,
 deblur PSNR within 0.5 dB of the run with the true trajectory". For every scene (simulated here
 with the defaults of ``fusiongs simulate``, or given with ``--scenes``), a copy without the
 trajectory (and, with ``--withhold-intrinsics``, without fx, fy, cx, cy) goes through the pose
 stage of ``fusiongs deblur`` alone (EDI + pycolmap, no training); its ``trajectory_initial.txt`` is
 compared with the truth at the frames' mid-exposure instants.
 
-Errors are measured after :func:`fusiongs.camera.sfm.align_sim3` (Umeyama on the camera centres,
+Errors are measured after :func:`fusiongs.sfm.align.align_sim3` (Umeyama on the camera centres,
 orientations added to the cross-covariance so the rotation is determined for a straight pan):
 position error in percent of the scene extent, rotation error in degrees. The **scene extent** is
 the diagonal of the axis-aligned bounding box of the true camera centres and of the surface points
@@ -43,10 +43,10 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from benchmarks.bench_deblur import run_one  # noqa: E402
-from fusiongs.camera.poses_from_frames import fill_poses  # noqa: E402
-from fusiongs.camera.sfm import pose_errors  # noqa: E402
 from fusiongs.camera.tum import read_tum  # noqa: E402
 from fusiongs.io import load_scene  # noqa: E402
+from fusiongs.sfm.align import pose_errors  # noqa: E402
+from fusiongs.sfm.register import fill_poses  # noqa: E402
 
 INTRINSICS = ("fx", "fy", "cx", "cy")
 
@@ -121,8 +121,8 @@ def aggregate(runs: list[dict]) -> dict:
 def run_pose_stage_only(scene: Path, out: Path, config: str, overrides: list[str]) -> dict:
     """The pose stage exactly as ``fusiongs deblur`` runs it (thresholds estimated, EDI,
     pycolmap), without training; writes ``out/trajectory_initial.txt`` and ``out/camera.json``."""
-    from fusiongs.train.pipeline import resolve_config
-    from fusiongs.train.poses_stage import CAMERA_FILE, run_pose_stage
+    from fusiongs.pipeline.deblur import resolve_config
+    from fusiongs.pipeline.poses import CAMERA_FILE, run_pose_stage
 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -194,7 +194,7 @@ def table(rows: list[dict], deblur_cols: bool) -> str:
 
 
 def checks(rows: list[dict]) -> list[str]:
-    """The issue's targets, checked on the worst scene."""
+    """The targets, checked on the worst scene."""
     pos = max(r["initial"]["pos_max_pct"] for r in rows)
     rot = max(r["initial"]["rot_max_deg"] for r in rows)
     out = [f"initial poses, worst max position error {pos:.2f} % of extent (target 1 %): "

@@ -142,6 +142,7 @@ def measure_memory(backend: str, n: int, size: int, k: float) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="fewer repetitions")
+    ap.add_argument("--cases", type=int, default=len(CASES), help="the first N cases only")
     ap.add_argument("--mem", nargs=4, metavar=("BACKEND", "N", "SIZE", "K"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     torch.set_num_threads(THREADS)
@@ -151,7 +152,7 @@ def main() -> None:
         print(json.dumps(measure_memory(b, int(n), int(size), float(k))))
         return
     rows = []
-    for name, n, size, target in CASES:
+    for name, n, size, target in CASES[:args.cases]:
         k = calibrate(n, size)
         s = make_scene(n, size, k)
         ppp = pairs_per_pixel(s)

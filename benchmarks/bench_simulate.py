@@ -50,6 +50,8 @@ def main() -> None:
     ap.add_argument("--cfa", default="RGGB")
     ap.add_argument("--events-target", type=int, default=8_000_000, help="0: nominal thresholds")
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--smoke", action="store_true",
+                    help="a tiny scene (benchmarks/smoke.sh: checks the script runs; no figures)")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(f"threads {args.threads}, load average {os.getloadavg()[0]:.1f} (2-core machine shared with "
@@ -60,6 +62,10 @@ def main() -> None:
     for name in args.presets.split(","):
         cfg = SimConfig(preset=name, cfa=None if args.cfa == "none" else args.cfa,
                         events_target=args.events_target or None)
+        if args.smoke:
+            from benchmarks._sweep import smoke_config
+
+            cfg = smoke_config(cfg)
         n_renders = (round(cfg.duration * cfg.dvs_rate_hz) + 1 + cfg.frames * (cfg.blur_samples + 1)
                      + len(novel_instants(cfg)))
         ref = render_reference(cfg) * n_renders

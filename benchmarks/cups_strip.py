@@ -5,7 +5,7 @@ EDI with the run's calibration (``OUT/calibration.json``) and the fusiongs deblu
 shown as sRGB of linear light. Prints, over every kept frame, the Tenengrad sharpness and a noise
 estimate of each column (:func:`noise_sigma`), and writes a strip of a few frames.
 
-    PYTHONPATH=. python benchmarks/cups_strip.py ../shared/data/real/eslnet_cups OUT strip.jpg
+    PYTHONPATH=. python benchmarks/cups_strip.py path/to/eslnet_cups OUT strip.jpg
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from fusiongs.eval.edi import edi_deblur
+from fusiongs.edi import edi_deblur
 from fusiongs.eval.holdout import tenengrad
 from fusiongs.eval.report import picture_strip, stack_rows
 from fusiongs.events.thresholds import read_calibration

@@ -40,16 +40,16 @@ from fusiongs import viz
 from fusiongs.camera.tum import PoseSamples, read_tum, write_tum
 from fusiongs.cli import main as fusiongs_cli
 from fusiongs.configs import config_file
-from fusiongs.eval.edi import edi_deblur
+from fusiongs.edi import edi_deblur
 from fusiongs.eval.evaluate import format_table
 from fusiongs.eval.metrics import psnr
 from fusiongs.frames.image_io import read_image
 from fusiongs.frames.response import linear_to_srgb
 from fusiongs.io import load_scene
+from fusiongs.pipeline.deblur import run_deblur
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.checkpoint import load_checkpoint
-from fusiongs.train.pipeline import run_deblur
 
 FAST = os.environ.get("FUSIONGS_NOTEBOOK_FAST") == "1"
 WORK = Path("nb01_work")  # everything this notebook writes goes here
@@ -172,7 +172,7 @@ print(sorted(p.name for p in OUT.iterdir()))
 # %% [markdown]
 # ## 5. Compare
 #
-# `metrics.json` holds PSNR and SSIM (8-bit sRGB, METHOD.md §8) per view and method, and their
+# `metrics.json` holds PSNR and SSIM (8-bit sRGB, docs/method.md §8) per view and method, and their
 # means: `deblur` views are the frames' mid-exposure instants (blurry input, EDI with a threshold
 # estimated from the consistency of consecutive frames, and fusiongs), `novel` views are held-out
 # instants between exposures, which

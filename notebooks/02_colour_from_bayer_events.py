@@ -179,8 +179,8 @@ fig = viz.strip([sim.scene.frames.images[0], np.clip(0.5 + 0.5 * rgb_change / sc
 # --split test`: a corridor, RGGB events, a sensor drawn from the calibration range), one that no
 # default was chosen on, written without frames. Beside fusiongs we score the *floor peer*: the
 # leaky-integrator (high-pass) image of the same events, which is what event-only training starts
-# from. At 96x72 the sweep measured 19.9 dB for fusiongs on this scene with the session-15 defaults
-# (2500 iterations; 19.5 with 1500, 19.2 before; benchmarks/RESULTS.md, "Event-only colour"): honest
+# from. At 96x72 the sweep measured 19.9 dB for fusiongs on this scene with 2500 iterations
+# (19.5 with 1500, 19.2 with earlier defaults; benchmarks/RESULTS.md, "Event-only colour"): honest
 # figures, below the 23 dB target.
 
 # %%

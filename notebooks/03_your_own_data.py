@@ -41,15 +41,15 @@ import numpy as np
 import fusiongs
 from fusiongs import viz
 from fusiongs.cli import main
-from fusiongs.eval.edi import edi_deblur
+from fusiongs.edi import edi_deblur
 from fusiongs.events.stream import EventStream
 from fusiongs.events.thresholds import read_calibration
 from fusiongs.frames.frameset import FrameSet
 from fusiongs.frames.image_io import read_image
 from fusiongs.io.scene_io import load_scene, save_scene
+from fusiongs.pipeline.deblur import run_deblur
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.sim.write import write_simulated_scene
-from fusiongs.train.pipeline import run_deblur
 
 FAST = os.environ.get("FUSIONGS_NOTEBOOK_FAST") == "1"
 K = 3 if FAST else 5  # --holdout K: frames i % K == K - 1 are left out of training
@@ -61,10 +61,10 @@ print("fusiongs", fusiongs.__version__, "| fast mode" if FAST else "| tutorial m
 # %% [markdown]
 # ## Find the recording
 #
-# `eslnet_cups` is looked for in `$FUSIONGS_REAL_DATA` when that is set, else in
-# `../shared/data/real/` beside the fusiongs checkout. It is a **native scene folder**
-# (`scene.json` + `events.h5` + `frames/`, see `FORMAT.md`); other layouts are turned into one with
-# `fusiongs convert`.
+# `eslnet_cups` is looked for in `$FUSIONGS_REAL_DATA` when that is set (point it at your own
+# recording folder), else in a `shared/data/real/` folder beside the fusiongs checkout. It is a
+# **native scene folder** (`scene.json` + `events.h5` + `frames/`, see `docs/scene-format.md`);
+# other layouts are turned into one with `fusiongs convert`.
 
 # %%
 def find_recording(name="eslnet_cups"):

@@ -1,7 +1,8 @@
-"""Shared test helpers: locating the optional real recordings, seeding."""
+"""Shared test helpers: locating the optional real recordings, seeding, a tiny scene and a tiny run."""
 
 from __future__ import annotations  # noqa: I001  (fusiongs first: it sets OMP_WAIT_POLICY before torch)
 
+import os
 from pathlib import Path
 
 import fusiongs  # noqa: F401  (first: sets OMP_WAIT_POLICY before torch is imported)
@@ -9,11 +10,18 @@ import numpy as np
 import pytest
 import torch
 
+from fusiongs.cli import main
+from fusiongs.sim.simulate import SimConfig, run_simulation
+from fusiongs.sim.write import write_simulated_scene
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 def real_data_dir() -> Path:
-    """``../shared/data/real`` beside the repository (third-party recordings, never committed)."""
+    """The real recordings (third-party, never committed): the folder shared/data/real beside the
+    repository, or the FUSIONGS_REAL_DATA environment variable when it is set."""
+    if os.environ.get("FUSIONGS_REAL_DATA"):
+        return Path(os.environ["FUSIONGS_REAL_DATA"])
     return REPO_ROOT.parent / "shared" / "data" / "real"
 
 
@@ -37,3 +45,28 @@ def generator() -> torch.Generator:
 
 def has_cuda() -> bool:
     return torch.cuda.is_available()
+
+
+# A few iterations of every stage (warm-up, events, pose learning, densification) on a 32x24 scene.
+TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixels=256",
+        "optim.iterations=10", "optim.pose_start=5", "densify.start=4", "densify.every=4",
+        "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
+
+
+@pytest.fixture(scope="module")
+def tiny_scene(tmp_path_factory):
+    """A 32x24 boxes scene with 2 frames, events, trajectory and truth (written to a folder)."""
+    root = tmp_path_factory.mktemp("scene")
+    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.12, frames=2, exposure=0.03,
+                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
+    res = run_simulation(cfg)
+    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    return root
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tiny_scene, tmp_path_factory):
+    """``fusiongs deblur`` with :data:`TINY` on :func:`tiny_scene`: the output folder."""
+    out = tmp_path_factory.mktemp("run")
+    assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY]) == 0
+    return out

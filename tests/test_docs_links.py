@@ -1,7 +1,7 @@
 """Relative links in README.md and docs/*.md point to files inside the repository.
 
 A user who installs fusiongs has the repository and nothing beside it, so a link such as
-``../shared/FORMAT.md`` is broken for them. Links with a scheme (``https:``, ``mailto:``) are not
+``../elsewhere/FORMAT.md`` is broken for them. Links with a scheme (``https:``, ``mailto:``) are not
 checked; a ``#fragment`` on a Markdown file must name one of its headings (GitHub's slugs).
 """
 
@@ -116,7 +116,7 @@ def test_checker_flags_links_outside_missing_and_bad_anchors(tmp_path):
     (tmp_path / "docs" / "a.md").write_text("# Title\n\n## The `b` part\n", encoding="utf-8")
     readme = tmp_path / "README.md"
     readme.write_text(
-        "See [fmt](../shared/FORMAT.md), [gone](docs/missing.md), [ok](docs/a.md#the-b-part),\n"
+        "See [fmt](../elsewhere/FORMAT.md), [gone](docs/missing.md), [ok](docs/a.md#the-b-part),\n"
         "[bad anchor](docs/a.md#nope), [web](https://example.org/x.md), ![img](docs/a.md)\n"
         "[ref]: ../outside.txt\n"
         "```\n[in code](nowhere.md)\n```\n"

@@ -71,9 +71,9 @@ class PinholeCamera:
 @dataclass(frozen=True)
 class UncalibratedCamera:
     """A camera of known size whose intrinsics are to be estimated (``scene.json`` without
-    ``fx``, ``fy``, ``cx``, ``cy``; FORMAT.md). It has no focal length or principal point, so code
+    ``fx``, ``fy``, ``cx``, ``cy``; docs/scene-format.md). It has no focal length or principal point, so code
     that needs them fails loudly until poses and intrinsics are estimated
-    (:func:`fusiongs.camera.poses_from_frames.estimate_camera_and_trajectory`).
+    (:func:`fusiongs.sfm.register.estimate_camera_and_trajectory`).
 
     Attributes:
         width, height: image size in pixels.

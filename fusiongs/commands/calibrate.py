@@ -26,7 +26,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="ON/OFF ratio from the IV fit, from the pixels' round trips (frame pairs "
                              "where a pixel came back through many events; the IV fit's scale kept), or "
                              "auto: the round trips' where the two differ by more than 5 %% "
-                             "(default: the library's, CalibrateOptions.ratio; RESULTS.md, session 49)")
+                             "(default: the library's, CalibrateOptions.ratio; see docs/calibration.md)")
     parser.add_argument("--sort", action="store_true", help="sort unsorted event timestamps")
     parser.add_argument("--drop-invalid", action="store_true",
                         help="drop events outside the sensor instead of failing")
@@ -35,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "and raise each threshold to what its renders fit to the event counts, as "
                              "deblur does when its events start (threshold.render_floor): minutes "
                              "instead of seconds; mends estimates that read low, never lowers one "
-                             "(RESULTS.md, session 53)")
+                             "(see docs/calibration.md, section 'Known limits')")
     parser.add_argument("--config", default=None,
                         help="with --refine: deblur's YAML config, a path or a preset name (default: deblur)")
     parser.add_argument("overrides", nargs="*", metavar="key=value",
@@ -56,11 +56,12 @@ def run(args: argparse.Namespace) -> int:
     import sys
     import time
 
+    from fusiongs.calibrate.estimate import estimate_thresholds
+    from fusiongs.calibrate.options import CalibrateOptions
     from fusiongs.errors import InputError
-    from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
-    from fusiongs.eval.truth import true_thresholds
     from fusiongs.events.thresholds import calibration_document, calibration_warnings, write_calibration
     from fusiongs.io.scene_io import load_scene
+    from fusiongs.io.truth import true_thresholds
 
     opts = CalibrateOptions(seed=args.seed, pixel_model=args.pixel_model)
     if args.ratio is not None:
@@ -74,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
                          args.config or " ".join(args.overrides))
     cfg = None
     if args.refine:  # a bad config is said before the scene is read
-        from fusiongs.train.pipeline import resolve_config
+        from fusiongs.pipeline.deblur import resolve_config
 
         cfg = resolve_config(args.config, args.overrides)
     scene = load_scene(args.scene, sort_events=args.sort, drop_invalid_events=args.drop_invalid)
@@ -82,13 +83,13 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(args.scene, "events", "a scene with events (thresholds are measured from them)",
                          "no events")
     if cfg is not None:
-        from fusiongs.train.refine import check_refine
+        from fusiongs.pipeline.refine import check_refine
 
         check_refine(scene, cfg, args.scene)
     t0 = time.perf_counter()
     th = estimate_thresholds(scene.frames, scene.events, opts)
     if cfg is not None:
-        from fusiongs.train.refine import refine_calibration
+        from fusiongs.pipeline.refine import refine_calibration
 
         th = refine_calibration(scene, th, cfg, args.scene, log=lambda m: print(m, file=sys.stderr))
     seconds = time.perf_counter() - t0

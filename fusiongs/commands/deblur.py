@@ -8,7 +8,7 @@ HELP = "fit a 3DGS scene and trajectory to blurry frames and events; write sharp
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene folder (scene.json; see FORMAT.md)")
+    p.add_argument("scene", help="scene folder (scene.json; see docs/scene-format.md)")
     p.add_argument("-o", "--output", "--out", dest="out", default=None, help="output folder (required)")
     p.add_argument("--config", default=None,
                    help="YAML config: a path or a preset name (deblur, deblur_fast, deblur_quality, "
@@ -28,10 +28,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from fusiongs.errors import InputError
-    from fusiongs.train.pipeline import resolve_config, run_deblur
+    from fusiongs.pipeline.deblur import resolve_config, run_deblur
 
     if args.print_config:
-        from fusiongs.train.config import to_yaml
+        from fusiongs.configs.load import to_yaml
 
         print(to_yaml(resolve_config(args.config, args.overrides)), end="")
         return 0

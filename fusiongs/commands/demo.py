@@ -21,9 +21,9 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusiongs.configs import config_file
+    from fusiongs.pipeline.deblur import run_deblur
     from fusiongs.sim.simulate import SimConfig, run_simulation
     from fusiongs.sim.write import write_simulated_scene
-    from fusiongs.train.pipeline import run_deblur
 
     out = Path(args.out)
     t0 = time.perf_counter()

@@ -29,8 +29,8 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from fusiongs.edi import edi_scene
     from fusiongs.errors import InputError
-    from fusiongs.eval.edi import edi_scene
     from fusiongs.frames.image_io import write_png
     from fusiongs.frames.response import linear_to_response
     from fusiongs.io.scene_io import load_scene
@@ -49,6 +49,12 @@ def run(args: argparse.Namespace) -> int:
     if args.samples < 1:
         raise InputError("command line", "--samples", "a positive integer", args.samples)
     scene = load_scene(args.scene, sort_events=args.sort, drop_invalid_events=args.drop_invalid)
+    if theta is None:
+        from fusiongs.calibrate.estimate import estimate_thresholds
+        from fusiongs.edi import check_scene
+
+        check_scene(scene)
+        theta = estimate_thresholds(scene.frames, scene.events)
     sharp = edi_scene(scene, theta=theta, n_samples=args.samples)
     out = Path(args.output)
     enc = np.asarray(linear_to_response(np.clip(sharp, 0.0, 1.0), scene.frames.response))

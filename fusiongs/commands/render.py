@@ -82,9 +82,9 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from fusiongs.camera.tum import read_tum
-    from fusiongs.eval.colour_anchor import read_anchor
-    from fusiongs.eval.video import write_mp4
-    from fusiongs.train.outputs import read_exposure
+    from fusiongs.outputs.colour_anchor import read_anchor
+    from fusiongs.outputs.video import write_mp4
+    from fusiongs.outputs.write import read_exposure
     from fusiongs.train.restore import restore_state
 
     if args.fps is not None and not (math.isfinite(args.fps) and args.fps > 0):
@@ -125,8 +125,8 @@ def write_views(state, camera, backend: str, times: list[float], c2w, out, prefi
     import numpy as np
 
     from fusiongs.atomic import atomic_path
-    from fusiongs.eval.colour_anchor import apply_anchor
     from fusiongs.frames.image_io import write_png
+    from fusiongs.outputs.colour_anchor import apply_anchor
     from fusiongs.train.render_io import render_depth_maps, render_srgb
 
     frames = []

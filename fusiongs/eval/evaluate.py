@@ -7,7 +7,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from fusiongs.eval.metrics import image_metrics
+from fusiongs.eval.metrics import global_affine_fit, image_metrics
 
 METRIC_KEYS = ("psnr", "ssim", "delta_e00")
 
@@ -45,6 +45,34 @@ def compare_methods(methods: Mapping[str, Mapping[str, np.ndarray]], gt: Mapping
     return {"views": views, "mean": mean, "affine": affine}
 
 
+def compare_global_affine(methods: Mapping[str, Mapping[str, np.ndarray]],
+                          gt: Mapping[str, np.ndarray]) -> dict:
+    """Like :func:`compare_methods` with ``affine=True``, but each method's views of one group
+    (``deblur_*``, ``novel_*``, other) share one per-channel affine fit
+    (:func:`fusiongs.eval.metrics.global_affine_fit`, the protocol of EventNeRF and Robust e-NeRF).
+
+    Returns:
+        ``{"mean": {group: {method: {"psnr", "ssim", "delta_e00", "n"}}}, "affine": "global"}``.
+    """
+    mean: dict[str, dict[str, dict[str, float]]] = {}
+    for method, imgs in methods.items():
+        by_group: dict[str, list[str]] = {}
+        for name in sorted(gt):
+            if name in imgs:
+                by_group.setdefault(_group(name), []).append(name)
+        for g, names in by_group.items():
+            fitted = global_affine_fit([imgs[n] for n in names], [gt[n] for n in names])
+            ms = [image_metrics(f, gt[n], delta_e=True) for f, n in zip(fitted, names)]
+            means = {k: _mean([m[k] for m in ms]) for k in METRIC_KEYS}
+            mean.setdefault(g, {})[method] = means | {"n": len(ms)}
+    return {"mean": mean, "affine": "global"}
+
+
+def _group(name: str) -> str:
+    """The view group of a truth image's name: ``deblur``, ``novel`` or ``other``."""
+    return "deblur" if name.startswith("deblur_") else "novel" if name.startswith("novel_") else "other"
+
+
 def _mean(values: list[float]) -> float:
     finite = [v for v in values if math.isfinite(v)]
     return float(np.mean(finite)) if finite else float("nan")
@@ -69,15 +97,17 @@ def colour_metrics(methods: Mapping[str, Mapping[str, np.ndarray]], gt: Mapping[
     Args:
         methods: as :func:`compare_methods` (``"fusiongs"`` with ``anchor`` applied).
         gt: truth images.
-        anchor: the run's :class:`fusiongs.eval.colour_anchor.ColourAnchor`.
+        anchor: the run's :class:`fusiongs.outputs.colour_anchor.ColourAnchor`.
         unanchored: fusiongs' images before the anchor (used when the anchor is applied).
 
     Returns:
-        ``{"affine_fit": ..., "colour_anchor": {...}}``: the metrics after the per-channel affine
-        fit (PSNR, SSIM, ΔE00), and the anchor (kind, label, gains) with, when applied,
-        ``"before"``: fusiongs' raw metrics without it (what the anchor changed).
+        ``{"affine_fit": ..., "global_affine_fit": ..., "colour_anchor": {...}}``: the metrics after
+        the per-channel affine fit of each image (PSNR, SSIM, ΔE00), after one fit per channel over
+        all views of a group (:func:`compare_global_affine`), and the anchor (kind, label, gains)
+        with, when applied, ``"before"``: fusiongs' raw metrics without it (what the anchor changed).
     """
     doc = anchor.as_dict()
     if anchor.applied and unanchored is not None:
         doc["before"] = compare_methods({"fusiongs": unanchored}, gt, delta_e=True)["mean"]
-    return {"affine_fit": compare_methods(methods, gt, affine=True), "colour_anchor": doc}
+    return {"affine_fit": compare_methods(methods, gt, affine=True),
+            "global_affine_fit": compare_global_affine(methods, gt), "colour_anchor": doc}

@@ -1,5 +1,5 @@
 """The floor peer of event-only reconstruction: the leaky-integrator (high-pass) intensity image of
-the events alone, scored like fusiongs's renders (issue 18 §4).
+the events alone, scored like fusiongs's renders.
 
 Event-only training anchors its intensity to this image (Event-3DGS's photovoltage contrast, a
 per-pixel high-pass filter of the event stream; Scheerlinck et al., ACCV 2018), so a

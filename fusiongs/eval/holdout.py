@@ -1,4 +1,4 @@
-"""Scoring without truth: held-out blurry frames (METHOD.md §6a).
+"""Scoring without truth: held-out blurry frames (docs/method.md §6a).
 
 Every K-th frame is left out of training; afterwards each method predicts the held-out blurry
 frame and is scored against the real one (PSNR on 8-bit values in the frames' own encoding):
@@ -7,7 +7,7 @@ frame and is scored against the real one (PSNR on 8-bit values in the frames' ow
   of the kept frames, through the frames' response (the blur model of training);
 * ``fusiongs_ratio``: the same renders, each times the exposure-ratio factor ``ρ`` of the previous
   and next kept frames (the detail the deblurred frames add to the renders,
-  :mod:`fusiongs.train.exposure_ratio`) carried along the fitted motion to that instant; the two
+  :mod:`fusiongs.outputs.exposure_ratio`) carried along the fitted motion to that instant; the two
   neighbours' linear predictions are averaged. It scores the deblurred frames' own detail against
   a frame that did not make it: better than ``fusiongs`` only if that detail is the scene's;
 * ``nearest``: the kept blurry frame whose mid-exposure is nearest, as it is;
@@ -22,7 +22,7 @@ The held-out rule (:func:`holdout_indices`): frame ``i`` (0-based, in time order
 frame (``i = 0``) is never held out since ``K - 1 >= 1``. Held-out frames are therefore never
 adjacent (K >= 2) and always lie between two kept frames.
 
-The functions here take arrays; :func:`fusiongs.train.pipeline.score_holdout` runs them on a
+The functions here take arrays; :func:`fusiongs.pipeline.deblur.score_holdout` runs them on a
 trained scene.
 """
 
@@ -33,8 +33,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from fusiongs.edi import edi_ratio
 from fusiongs.errors import InputError
-from fusiongs.eval.edi import edi_ratio
 from fusiongs.events.stream import EventStream
 from fusiongs.frames.frameset import FrameSet
 
@@ -107,7 +107,7 @@ def event_counts_at(events: EventStream, t_ref: float, times: Sequence[float] | 
     """ON/OFF event counts from ``t_ref`` to each instant: ``N_pm(t_k) - N_pm(t_ref)``.
 
     ``N(t)`` counts the events with ``t_e < t`` (the half-open convention of
-    :func:`fusiongs.eval.edi.event_count_samples`), so the result is negative before ``t_ref``.
+    :func:`fusiongs.edi.event_count_samples`), so the result is negative before ``t_ref``.
 
     Args:
         events: time-sorted stream (µs clock = seconds x 1e6).
@@ -144,7 +144,7 @@ def carry_linear(image_linear: np.ndarray, counts: np.ndarray, theta, cfa: str |
 
     ``L(t_k) = L(t_ref) exp(theta_+ dN_+(t_k) - theta_- dN_-(t_k))`` per pixel; for a CFA sensor each
     raw pixel uses its own channel's thresholds and the ratio map is demosaiced (bilinear) to RGB
-    (:func:`fusiongs.eval.edi.edi_ratio`, as EDI does); grey events scale every channel alike.
+    (:func:`fusiongs.edi.edi_ratio`, as EDI does); grey events scale every channel alike.
 
     Args:
         image_linear: ``[H, W, C]`` linear image at ``t_ref`` (C = 1 or 3; 3 for CFA events).

@@ -1,4 +1,4 @@
-"""Image quality metrics following the evaluation protocol of ../shared/METHOD.md §8.
+"""Image quality metrics following the evaluation protocol of docs/method.md ('Evaluation protocol').
 
 PSNR and SSIM are computed on 8-bit sRGB images (values quantised to k/255). SSIM uses a Gaussian
 window (σ = 1.5, 11 taps), population (not sample) covariances and only the window positions that fit
@@ -97,6 +97,30 @@ def affine_fit(pred: np.ndarray, gt: np.ndarray) -> np.ndarray:
     a = np.where(var > 1e-12, cov / np.maximum(var, 1e-12), 0.0)
     b = mg - a * mp
     return np.clip(p * a + b, 0.0, 1.0)
+
+
+def global_affine_fit(preds: list[np.ndarray], gts: list[np.ndarray]) -> list[np.ndarray]:
+    """One per-channel least-squares affine correction ``a_c·pred + b_c`` fitted over all views.
+
+    The stricter protocol of event-only work (EventNeRF, Rudnev et al., CVPR 2023; Robust e-NeRF,
+    Low and Lee, ICCV 2023): one gain and offset per channel for a whole scene, so the views must
+    agree with each other in brightness, not only each with its own truth. Inputs: lists of
+    ``[H, W, C]`` images (views may differ in size); returns the corrected views, clipped to [0, 1].
+    """
+    if len(preds) != len(gts) or not preds:
+        raise InputError("metrics", "preds/gts", "two non-empty lists of the same length",
+                         (len(preds), len(gts)))
+    for a, b in zip(preds, gts):
+        _check_pair(np.asarray(a), np.asarray(b))
+    c = np.asarray(preds[0]).shape[-1]
+    p2 = np.concatenate([np.asarray(x, dtype=np.float64).reshape(-1, c) for x in preds])
+    g2 = np.concatenate([np.asarray(x, dtype=np.float64).reshape(-1, c) for x in gts])
+    mp, mg = p2.mean(0), g2.mean(0)
+    var = ((p2 - mp) ** 2).mean(0)
+    cov = ((p2 - mp) * (g2 - mg)).mean(0)
+    a = np.where(var > 1e-12, cov / np.maximum(var, 1e-12), 0.0)
+    b = mg - a * mp
+    return [np.clip(np.asarray(x, dtype=np.float64) * a + b, 0.0, 1.0) for x in preds]
 
 
 def image_metrics(pred: np.ndarray, gt: np.ndarray, *, affine: bool = False,

@@ -3,7 +3,7 @@
 A 1e8-event stream holds 1.3 GB of arrays; the numpy forms these replace built int64 pixel
 indices and argsorts of the whole stream (0.8 GB each, 7.6 GB peak in ``fusiongs calibrate``).
 Each kernel walks the events once in time order, keeping per-pixel state (the time of the pixel's
-previous event). The numpy forms stay in ``fusiongs/events/_reference.py`` as the specification,
+previous event). The numpy forms stay in ``tests/reference/event_kernels.py`` as the specification,
 and tests compare the two on random streams.
 """
 

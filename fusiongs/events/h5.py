@@ -1,4 +1,4 @@
-"""Native ``events.h5`` read/write (../shared/FORMAT.md) and the HDF5 helpers other readers share.
+"""Native ``events.h5`` read/write (docs/scene-format.md) and the HDF5 helpers other readers share.
 
 Native layout: group ``events`` with 1-D datasets ``t`` (int64 µs), ``x``/``y`` (uint16) and ``p``
 (int8 ±1 or uint8 1/0), optional ``events.attrs["t_offset_us"]`` added to every ``t``. DSEC files

@@ -1,7 +1,7 @@
 """Contrast thresholds of an event sensor: the container ``calibration.json`` holds.
 
 A DVS pixel fires an ON event when its log intensity rises by ``theta_pos`` and an OFF event when it
-falls by ``theta_neg`` (METHOD.md section 1); real sensors have ``theta_pos != theta_neg`` and, for
+falls by ``theta_neg`` (docs/method.md section 1); real sensors have ``theta_pos != theta_neg`` and, for
 colour (CFA) sensors, one pair per colour channel. :class:`SensorThresholds` carries one pair per
 channel with its uncertainty; ``fusiongs calibrate`` writes it, and ``fusiongs edi`` / ``deblur``
 read it back with ``--calibration FILE``.
@@ -194,7 +194,7 @@ def reset_model_parameters(thresholds: SensorThresholds, where: str | Path = "ca
                            ) -> tuple[float, float, bool] | None:
     """``(dead time µs, weight cap, burst end)`` when the calibration chose the pixel model of a
     pixel held in reset (its details' ``pixel_model``, ``dead_time_us``, ``reset_weight_cap``,
-    default cap 4, and ``reset_burst_end``: the weights of :func:`fusiongs.events.stats.reset_weights`
+    default cap 4, and ``reset_burst_end``: the weights of :func:`fusiongs.events.dead_time.reset_weights`
     that it was estimated with; a file without it is from before that term, so False), else None.
 
     Raises:
@@ -221,13 +221,13 @@ def reset_model_parameters(thresholds: SensorThresholds, where: str | Path = "ca
 def calibration_event_weights(events, thresholds) -> np.ndarray | None:
     """``[E]`` float32 threshold crossings each event of ``events`` stands for, where the
     calibration ``thresholds`` chose the pixel model of a pixel held in reset
-    (:func:`reset_model_parameters`; :func:`fusiongs.events.stats.reset_weights`); None otherwise
+    (:func:`reset_model_parameters`; :func:`fusiongs.events.dead_time.reset_weights`); None otherwise
     (the events count once each), also for thresholds that are plain numbers.
 
     Raises:
         InputError: a reset calibration whose dead time or cap is not a valid number.
     """
-    from fusiongs.events.stats import reset_weights
+    from fusiongs.events.dead_time import reset_weights
 
     if not isinstance(thresholds, SensorThresholds):
         return None

@@ -1,4 +1,4 @@
-"""The native scene folder (../shared/FORMAT.md, version 1): the ``Scene`` container."""
+"""The native scene folder (docs/scene-format.md, version 1): the ``Scene`` container."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Read and write the native scene folder (FORMAT.md, version 1).
+"""Read and write the native scene folder (docs/scene-format.md, version 1).
 
 ``load_scene`` validates ``scene.json`` (:mod:`fusiongs.io.scene_json`), then every file it names:
 the event stream (``fusiongs.events.h5``), each frame (8/16-bit PNG/JPEG, or a raw file through

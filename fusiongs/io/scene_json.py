@@ -1,4 +1,4 @@
-"""``scene.json`` of the native scene folder (FORMAT.md, version 1): parse and validate, and dump.
+"""``scene.json`` of the native scene folder (docs/scene-format.md, version 1): parse and validate, and dump.
 
 Parsing checks every key it knows and ignores unknown ones; each error is an
 :class:`~fusiongs.errors.InputError` naming the file and the key path (``frames[3].t_end``).

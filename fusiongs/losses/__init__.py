@@ -1,4 +1,4 @@
-"""Losses of the fusion method, each a function of tensors (METHOD.md sections 1-4).
+"""Losses of the fusion method, each a function of tensors (docs/method.md sections 1-4).
 
 - :mod:`fusiongs.losses.blur`: exposure-integrated blur model and blur loss.
 - :mod:`fusiongs.losses.event`: rendered log change, mse / band / pvc event losses, pixel sampling.

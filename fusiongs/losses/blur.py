@@ -5,7 +5,7 @@ A blurry frame ``i`` with exposure ``[s_i, e_i]`` is modelled as
 linear renders at N instants are averaged **in linear light**, scaled by an optional per-frame gain
 and encoded by the camera response (sRGB by default). This is the physical blur model of
 BAD-NeRF / BAD-Gaussians (Wang et al., CVPR 2023; Zhao et al., ECCV 2024) and E2NeRF (Qi et al.,
-ICCV 2023); see METHOD.md section 1. The loss is the 3DGS photometric loss
+ICCV 2023); see docs/method.md section 1. The loss is the 3DGS photometric loss
 ``(1 - lambda) * L1 + lambda * (1 - SSIM)`` (Kerbl et al., SIGGRAPH 2023), lambda = 0.2.
 """
 
@@ -72,7 +72,7 @@ def apply_response(linear: torch.Tensor, response: str = "srgb") -> torch.Tensor
     """Encode linear irradiance with a camera response curve (differentiable).
 
     Delegates to :func:`fusiongs.frames.response.linear_to_response` (sRGB of IEC 61966-2-1,
-    ``"linear"``, or ``"gamma:G"`` meaning ``value = linear ** (1 / G)``; FORMAT.md
+    ``"linear"``, or ``"gamma:G"`` meaning ``value = linear ** (1 / G)``; docs/scene-format.md
     ``frame_response``). Values are not clipped above 1, since clipping would stop the gradients
     of over-bright renders; gradients are finite everywhere, including at 0.
 
@@ -91,7 +91,7 @@ def blurry_from_renders(
 ) -> torch.Tensor:
     """Predicted blurry frame(s) from sharp linear renders over the exposure.
 
-    ``B = CRF(g * mean_k L_k)`` (METHOD.md section 1).
+    ``B = CRF(g * mean_k L_k)`` (docs/method.md section 1).
 
     Args:
         renders_linear: ``[N, H, W, C]`` or ``[B, N, H, W, C]`` linear renders at the instants of

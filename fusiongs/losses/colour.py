@@ -1,7 +1,7 @@
 """Colour events: CFA layouts, a differentiable bilinear demosaic of float maps, channel weights.
 
 A colour event sensor (Color-DAVIS346) has a 2x2 Bayer colour filter: each pixel measures the log
-change of one channel. Two ways to use it (METHOD.md section 1):
+change of one channel. Two ways to use it (docs/method.md section 1):
 
 - *mask* (EventNeRF, Rudnev et al., CVPR 2023; EvDeblurNeRF, Cannici & Scaramuzza, CVPR 2024):
   compare each pixel's own CFA channel of the rendered log change (see

@@ -1,9 +1,9 @@
 """Event losses on sampled pixels: rendered log change against event counts or HPF contrast.
 
-An event pixel fires when its log intensity changes by ``p * theta_p`` (METHOD.md section 1), so
+An event pixel fires when its log intensity changes by ``p * theta_p`` (docs/method.md section 1), so
 over a window ``(t_a, t_b]``: ``dlog I ~= theta_+ n_+ - theta_- n_-``. Three losses compare the
 rendered log change ``d_hat = log(I(t_b) + eps) - log(I(t_a) + eps)`` with the events on ``P``
-sampled pixels (METHOD.md section 3):
+sampled pixels (docs/method.md section 3):
 
 - *mse* (EventNeRF, Rudnev et al., CVPR 2023, Eq. 5; EvDeblurNeRF, Cannici & Scaramuzza, CVPR 2024):
   ``sum_c w_c (d_hat - (theta_+ n_+ - theta_- n_-))^2 / sum_c w_c``;
@@ -255,7 +255,7 @@ def event_loss_pvc(
     channel_weights: torch.Tensor | None = None,
     zero_tol: float = 0.0,
 ) -> torch.Tensor:
-    """Photovoltage-contrast loss: band or mse against the HPF target ``D_gt`` (METHOD.md 2-3).
+    """Photovoltage-contrast loss: band or mse against the HPF target ``D_gt`` (docs/method.md 2-3).
 
     ``kind="band"`` is :func:`event_loss_band`; ``kind="mse"`` is the squared error
     ``(d_hat - theta_p D_gt)^2`` with ``theta_p`` chosen by :func:`polarity_theta`.

@@ -1,6 +1,6 @@
 """Event consistency of long windows at low spatial frequencies.
 
-Over a window ``[t_a, t_b)`` a pixel's events say ``dlog I ~= theta_+ n_+ - theta_- n_-`` (METHOD.md
+Over a window ``[t_a, t_b)`` a pixel's events say ``dlog I ~= theta_+ n_+ - theta_- n_-`` (docs/method.md
 section 1), but the count carries every event's share of the pixel's threshold mismatch, so the
 per-pixel error grows with the number of events: short windows are compared pixel by pixel
 (:mod:`fusiongs.losses.event`), and they fix an image's edges, not the level of a large plain area

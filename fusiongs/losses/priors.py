@@ -1,4 +1,4 @@
-"""Optional image priors: EDI-deblurred frames and HPF intensity images (METHOD.md section 3).
+"""Optional image priors: EDI-deblurred frames and HPF intensity images (docs/method.md section 3).
 
 - EDI prior: the mid-exposure render should look like the EDI-deblurred frame (Pan et al., CVPR
   2019), used early in training (as DiET-GS and E2NeRF use event-deblurred images).

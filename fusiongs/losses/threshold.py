@@ -1,6 +1,6 @@
 """Learnable contrast threshold: per polarity and colour channel, optionally varying in space and time.
 
-``theta = exp(s)`` keeps the threshold positive (METHOD.md section 4). Event-3DGS (Han et al.,
+``theta = exp(s)`` keeps the threshold positive (docs/method.md section 4). Event-3DGS (Han et al.,
 NeurIPS 2024) learns a single scalar; a real sensor's threshold varies over pixels and drifts in
 time, so two optional terms are added to ``s``:
 

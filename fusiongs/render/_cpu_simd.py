@@ -14,9 +14,9 @@ float32 lanes with AVX-512, 8 with AVX2):
   that a division carries no ZeroDivisionError branch;
 - colours live in row buffers laid out ``[D, W]``; three colours (the usual case) are handled in one
   pass over the row (views of the three rows: 2-9 % less time than a pass per channel on the
-  173x130 event-only model, RESULTS.md session 32), other counts one channel at a time; with three
+  173x130 event-only model), other counts one channel at a time; with three
   colours the forward pass also computes each pixel's alpha in that same pass (7-9 % less forward
-  time, the same images bit for bit; RESULTS.md session 37), while the backward pass keeps its
+  time, the same images bit for bit), while the backward pass keeps its
   three passes (fused, in full or in part, it was no faster);
 - the forward pass shrinks each row's span to the pixels still below the stop transmittance, and
   the backward pass skips, before any per-pixel work, entries behind the last contributing entry of

@@ -1,7 +1,7 @@
 """Blurry frame formation: exposure-time integration in linear light, sensor noise, 8-bit sRGB
 (or linear 16-bit) encoding.
 
-A blurry frame is the mean linear radiance over its exposure window (METHOD.md section 1), here
+A blurry frame is the mean linear radiance over its exposure window (docs/method.md section 1), here
 with many sub-samples (midpoint rule), then photon shot noise and read noise in linear light, the
 sRGB transfer curve and 8-bit quantisation.
 """

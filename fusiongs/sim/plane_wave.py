@@ -10,7 +10,7 @@ downward; EDI's model: the signed count between two instants is the change of ``
 once, and every later period is the same list shifted by ``n T``, so ``1e8`` events are written
 with one period (about ``2 levels`` events per pixel) in memory. Blurry frames are the exposure
 means of ``exp(L)`` (16 instants) as 8-bit sRGB; the trajectory is exact. The scene follows
-``../shared/FORMAT.md``, so every verb reads it like any other scene.
+``docs/scene-format.md``, so every verb reads it like any other scene.
 
     python -m fusiongs.sim.plane_wave OUT --events 1e8 [--size 1280x720] [--duration 10]
 """

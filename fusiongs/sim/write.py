@@ -16,7 +16,7 @@ from fusiongs.io.scene import Scene
 
 def write_simulated_scene(scene: Scene, gt: dict[str, np.ndarray], path: str | Path, *,
                           stats: dict | None = None, overwrite: bool = False) -> Path:
-    """Write ``scene`` (FORMAT.md folder) and ``gt/<name>.png`` (8-bit sRGB) for every truth image.
+    """Write ``scene`` (docs/scene-format.md folder) and ``gt/<name>.png`` (8-bit sRGB) for every truth image.
 
     Frames are written as 8-bit PNGs, or as 16-bit ones when their response is ``"linear"``
     (8 bits of linear light would crush the shadows).

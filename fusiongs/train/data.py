@@ -221,13 +221,16 @@ def edi_images(scene: Scene, theta, device: torch.device, reset_weights: bool = 
             pair; 0 or None to estimate them (``fusiongs calibrate``'s estimator).
         reset_weights: count a reset pixel's events as the crossings they stand for where the
             calibration chose that model (``events.reset_weights``; see
-            :func:`fusiongs.eval.edi.edi_scene`).
+            :func:`fusiongs.edi.edi_scene`).
     """
-    from fusiongs.eval.edi import edi_scene
+    from fusiongs.edi import check_scene, edi_scene
 
-    e = edi_scene(scene, theta=theta if theta is not None and not (isinstance(theta, float | int)
-                                                                      and theta == 0) else None,
-                  reset_weights=reset_weights)
+    if theta is None or (isinstance(theta, float | int) and theta == 0):
+        from fusiongs.calibrate.estimate import estimate_thresholds
+
+        check_scene(scene)
+        theta = estimate_thresholds(scene.frames, scene.events)
+    e = edi_scene(scene, theta=theta, reset_weights=reset_weights)
     if e.shape[-1] == 1:
         e = np.repeat(e, 3, axis=-1)
     return torch.from_numpy(np.clip(e, 0.0, None).astype(np.float32)).to(device)
@@ -303,7 +306,7 @@ def pvc_readouts(events: EventStream, instants: np.ndarray, t_range: tuple[float
 
     Read-outs are taken at ``instants`` (e.g. every frame's exposure instants) and on a grid of
     ``spacing`` seconds over ``t_range``; a window's target is then ``pvc[b] - pvc[a]``
-    (Event-3DGS photovoltage contrast, METHOD.md §2), free of the O(events) cost per window.
+    (Event-3DGS photovoltage contrast, docs/method.md §2), free of the O(events) cost per window.
 
     Returns:
         ``(times [R] float64 s, maps [R, H, W] float32 V(t)/θ0)``.

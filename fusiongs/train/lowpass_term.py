@@ -5,8 +5,7 @@ two ends of *different* windows also bound a window, usually a long one (a third
 on average), at no extra render. Its counts are compared after a spatial low-pass
 (:func:`fusiongs.losses.event_lowpass.event_loss_lowpass`), so what they know about large-scale
 levels (a plain wall against the objects in front of it) reaches the model without the per-pixel
-threshold mismatch that makes long windows harmful pixel by pixel (benchmarks/RESULTS.md,
-session 14).
+threshold mismatch that makes long windows harmful pixel by pixel.
 """
 
 from __future__ import annotations
@@ -16,7 +15,7 @@ from collections import deque
 import numpy as np
 import torch
 
-from fusiongs.events.stats import spatial_hot_pixels
+from fusiongs.events.dead_time import spatial_hot_pixels
 from fusiongs.losses.event import log_intensity, select_channel
 from fusiongs.losses.event_lowpass import event_loss_lowpass, full_support
 from fusiongs.train.data import TrainData, square_dilate
@@ -26,7 +25,7 @@ from fusiongs.train.state import FusionState
 
 def hot_map(data: TrainData, device: torch.device) -> torch.Tensor:
     """``[H, W]`` bool hot pixels of the stream (spatial outliers of the event count,
-    :func:`fusiongs.events.stats.spatial_hot_pixels`), computed once and kept in ``data``."""
+    :func:`fusiongs.events.dead_time.spatial_hot_pixels`), computed once and kept in ``data``."""
     if data.hot is None:
         h, w = data.camera.height, data.camera.width
         hot = spatial_hot_pixels(data.events).reshape(h, w)

@@ -9,6 +9,7 @@ import torch
 
 from fusiongs.frames.image_io import read_image
 from fusiongs.frames.response import linear_to_srgb
+from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import FusionState
 
 #: Exposure of renders whose absolute level nothing fixes (event-only runs without a colour
@@ -16,6 +17,13 @@ from fusiongs.train.state import FusionState
 EXPOSURE_PERCENTILE = 99.5
 #: ... at this level, so that no more than the brightest 0.5 % of values clip at white.
 EXPOSURE_LEVEL = 0.9
+
+
+def auto_exposure(cfg: DeblurConfig, n_frames: int) -> bool:
+    """Whether renders get :func:`exposure_gain`: without frames (their
+    level is arbitrary: events measure changes of log intensity) unless ``output.exposure`` is
+    ``none``. With one frame the colour anchor fixes the level; with several, the blur loss."""
+    return n_frames == 0 and cfg.output.exposure == "auto"
 
 
 def exposure_gain(linear: np.ndarray) -> float:

@@ -2,14 +2,14 @@
 
 When the event term starts, the model has been fitted to the blurred frames alone. Its renders at
 the two ends of a window ``[t_a, t_b)`` give each pixel's log change ``d``, and the window's
-counts say ``d ≈ θ₊ n₊ − θ₋ n₋`` (METHOD.md §2, EventNeRF Eq. 5). The least-squares θ of that
+counts say ``d ≈ θ₊ n₊ − θ₋ n₋`` (docs/method.md §2, EventNeRF Eq. 5). The least-squares θ of that
 relation, per colour channel and polarity, is what the event loss itself would learn at this
 render. A model fitted to blurred frames has at most the true contrast, usually less (fine detail
 is still missing), so this θ reads low, not high: on the states of 26 tuning scenes when their
 events started it was 31 % low in the geometric mean and at most 10 % high; low-passed by 3 px
-(below), at most 17 % high (benchmarks/RESULTS.md, session 52). A calibration below it is then
+(below), at most 17 % high. A calibration below it is then
 too low, and a θ far below the truth makes the event term ask for less contrast than the frames
-show (issue 13: the events cost PSNR). :func:`raise_to_render_floor` lifts each θ to that floor;
+show (the events then cost PSNR). :func:`raise_to_render_floor` lifts each θ to that floor;
 it cannot lower a calibration that is too high.
 
 Counts that are lower bounds (the pixel hit its dead time in the window: ``TrainData.censored_map``)
@@ -169,7 +169,7 @@ def apply_render_floor(state, data: TrainData, cfg) -> tuple[torch.Tensor, torch
 
 
 # One-sigma relative uncertainty of a θ the floor raised: the raised θ's rms log error over the 26
-# tuning scenes of benchmarks/RESULTS.md session 52 was 0.112 (the same 12 % as a calibration whose
+# tuning scenes was 0.112 (the same 12 % as a calibration whose
 # refractory gate fell back, CalibrateOptions.systematic_fallback).
 REFINED_SYSTEMATIC = 0.12
 

@@ -1,4 +1,4 @@
-"""Schedules and window sampling: small pure functions of the step (METHOD.md sections 3, 4, 6).
+"""Schedules and window sampling: small pure functions of the step (docs/method.md sections 3, 4, 6).
 
 Steps count from 0. Every function is pure; randomness takes an explicit ``torch.Generator``, and
 random draws are made on that generator's device (the CPU without one).
@@ -32,7 +32,7 @@ def event_weight(step: int, warmup: int, lam: float, ramp: int = 0) -> float:
     """Event-loss weight ``lambda_ev(step)``: 0 during the warm-up, then ``lam``.
 
     With ``ramp > 0`` the weight grows linearly from 0 at ``step == warmup`` to ``lam`` at
-    ``step == warmup + ramp``. METHOD.md section 3: warm-up ~1000 iterations, ``lam`` ~0.1.
+    ``step == warmup + ramp``. docs/method.md section 3: warm-up ~1000 iterations, ``lam`` ~0.1.
 
     Args:
         step: iteration index (0-based).

@@ -1,6 +1,6 @@
 """Settings of ``fusiongs deblur``: nested dataclasses loaded from ``configs/*.yaml``.
 
-Field comments are the documentation of every key; defaults follow ../shared/METHOD.md.
+Field comments are the documentation of every key; defaults follow docs/method.md.
 """
 
 from __future__ import annotations
@@ -46,9 +46,9 @@ class InitSettings:
     # colour of the first Gaussians of a one-frame scene started from the events' stereo: the
     # frame's mean linear colour (the HPF points around it), with the colour learning rates scaled
     # by its mean level / 0.5 so that a step changes log intensity as much as from grey; or grey
-    # (0.5 linear, before session 18); auto: the frame's for grey events (which carry no colour),
+    # (0.5 linear); auto: the frame's for grey events (which carry no colour),
     # grey for colour events (the frame's start cost the dark RGGB scenes 1.5-3 dB). Chosen on
-    # one-frame tuning seeds 7, 3, 8, 6, 5, 17 (RESULTS.md, sessions 18-19)
+    # one-frame tuning seeds 7, 3, 8, 6, 5, 17
     start_colour: Literal["auto", "frame", "grey"] = "auto"
 
     def __post_init__(self) -> None:
@@ -100,7 +100,7 @@ class EventSettings:
     windows_free: int = 1            # windows of log-uniform length anywhere in the stream
     chain_windows: bool = False      # free windows in a chain, each one's end the next one's
                                      # start: n windows in n + 1 renders instead of 2 n (event-only
-                                     # 173x130: 10 % less training, −0.40 dB; RESULTS.md session 38)
+                                     # 173x130: 10 % less training, −0.40 dB)
     min_window: float = 0.001        # shortest free window (s)
     max_window: float = 0.0          # longest free window (s); 0 = one frame interval (without
                                      # frames: the whole recording)
@@ -148,7 +148,7 @@ class ThresholdSettings:
     smoothness: float = 1.0          # weight of the field / drift smoothness regulariser
     # when the events start (iteration events.warmup, >= 2 frames): raise each θ to the one the
     # renders fit to the counts, which reads low, not high (train/render_threshold.py). It mends
-    # calibrations far below the truth (RESULTS.md session 52: chosen on tuning seeds)
+    # calibrations far below the truth (chosen on tuning seeds)
     render_floor: bool = True
     render_floor_windows: int = 32   # event windows of that fit (lengths up to one frame interval)
     render_floor_sigma: float = 3.0  # low-pass (pixels) of renders and counts in that fit; 0 none
@@ -239,10 +239,10 @@ class OutputSettings:
     progress: bool = True            # progress bar with loss and PSNR
     video_fps: int = 12
     checkpoint_every: int = 1000     # 0: only at the end (and on Ctrl-C)
-    exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (train/exposure_ratio.py)
+    exposure_ratio: bool = True      # deblurred = render x frame / predicted frame (outputs/)
     ratio_eps: float = 0.01          # its linear offset (keeps dark, noisy pixels from amplifying)
     ratio_iterations: int = 3        # 0: the ratio stays at its pixel over the exposure; N: it moves
-                                     # with the surfaces, N Richardson-Lucy steps (train/motion_ratio.py)
+                                     # with the surfaces, N Richardson-Lucy steps (outputs/motion_ratio.py)
     ratio_between: bool = True       # instants between two exposures (renders/, novel views): both
                                      # frames' factors carried there along the motion (ratio_iterations >= 1)
     truth_every: int = 100           # PSNR against gt/ every N iterations (history.jsonl); 0 = off

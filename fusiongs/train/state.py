@@ -27,7 +27,7 @@ class FusionState(nn.Module):
             Gaussians: a render's poses are a few dozen 4x4 matrices through some 400 small ops
             (SE(3) log and exp of the B-spline) and as many backward nodes, which on a GPU are
             that many kernel launches for a kilobyte of arithmetic, a third of a training step's
-            launches (RESULTS.md, session 23); on the host they cost microseconds each, and only
+            launches; on the host they cost microseconds each, and only
             the ``[T, 4, 4]`` view matrices cross to the device (their gradient back).
         threshold: contrast thresholds θ = exp(s) per polarity (and per colour channel).
         log_gain: ``[F]`` log exposure gains g_i (zeros; learnable when configured).

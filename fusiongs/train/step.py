@@ -1,4 +1,4 @@
-"""One training iteration's losses (../shared/METHOD.md §1 and §3), as a function of the state.
+"""One training iteration's losses (docs/method.md, 'Losses and schedule'), as a function of the state.
 
 The N exposure instants of one frame and the instants of the free event windows are rendered in
 one rasteriser call; the blur loss uses the first N renders, the event windows pairs of them
@@ -60,7 +60,7 @@ def predict_blurry(linear: torch.Tensor, log_gain: torch.Tensor, response: str, 
                    grey_weights: tuple[float, float, float]) -> torch.Tensor:
     """Blurry frame ``[H, W, C]`` from ``[N, H, W, 3]`` sharp linear renders of one exposure.
 
-    ``B = CRF(g · mean_k L_k)`` (METHOD.md §1); a monochrome frame (C = 1) sees ``w · L``.
+    ``B = CRF(g · mean_k L_k)`` (docs/method.md §1); a monochrome frame (C = 1) sees ``w · L``.
     """
     mean = exposure_average(linear) * torch.exp(log_gain)
     if channels == 1:
@@ -86,7 +86,7 @@ def snap_windows(windows: torch.Tensor, readouts: torch.Tensor) -> torch.Tensor:
 
 
 def _pvc_target(data: TrainData, t_a: float, t_b: float) -> torch.Tensor:
-    """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; METHOD.md §2) from
+    """``[H, W]`` photovoltage contrast ``(V(t_b) − V(t_a)) / θ0`` (Event-3DGS; docs/method.md §2) from
     the precomputed read-outs; both ends must be read-out instants (found on the host)."""
     if data.pvc is None or data.pvc_times is None:
         raise RuntimeError("the pvc loss needs TrainData.pvc (see fusiongs.train.data.pvc_readouts)")
@@ -154,7 +154,7 @@ def event_window_loss(state: FusionState, data: TrainData, cfg: DeblurConfig, li
 
 
 def edi_prior_weight(cfg: DeblurConfig, it: int) -> float:
-    """EDI prior weight: ``edi_weight`` decaying linearly to 0 at ``edi_until`` (METHOD.md §3)."""
+    """EDI prior weight: ``edi_weight`` decaying linearly to 0 at ``edi_until`` (docs/method.md §3)."""
     p = cfg.priors
     if p.edi_weight <= 0 or it >= p.edi_until:
         return 0.0
@@ -201,7 +201,7 @@ def training_step(state: FusionState, data: TrainData, cfg: DeblurConfig, frame:
                   lam_ev: float, gen: torch.Generator, it: int = 0, coarse: int = 1, *,
                   device_gen: torch.Generator | None = None,
                   lowpass_history: LowpassHistory | None = None) -> StepResult:
-    """Render and compute the losses of one iteration (METHOD.md §3).
+    """Render and compute the losses of one iteration (docs/method.md §3).
 
     With frames: ``L_blur + λ_ev · L_ev`` (+ EDI prior) for one frame's exposure. Without frames
     (event-only mode): ``α · L_ev + (1 − α) · L_intensity`` on free windows, with ``lam_ev`` = α

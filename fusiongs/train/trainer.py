@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +21,7 @@ import numpy as np
 import torch
 
 from fusiongs.camera.trajectory import Trajectory
-from fusiongs.camera.tum import PoseSamples
+from fusiongs.configs.load import to_dict
 from fusiongs.errors import ConfigError, InputError
 from fusiongs.events.thresholds import (
     SensorThresholds,
@@ -35,7 +35,6 @@ from fusiongs.scene.densify import DensifyConfig, DensifyStrategy
 from fusiongs.scene.gaussians import GaussianModel
 from fusiongs.scene.optim import GaussianLR, make_optimizer, relative_colour_step
 from fusiongs.train.checkpoint import checkpoint_errors, load_checkpoint, save_checkpoint
-from fusiongs.train.config import to_dict
 from fusiongs.train.data import (
     TrainData,
     edi_images,
@@ -46,26 +45,13 @@ from fusiongs.train.data import (
 )
 from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
 from fusiongs.train.lowpass_term import LowpassHistory
+from fusiongs.train.render_io import auto_exposure
 from fusiongs.train.schedules import event_only_alpha, event_weight, log_linear_lr
 from fusiongs.train.settings import DeblurConfig
 from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, event_stereo_start, scene_extent
 from fusiongs.train.step import training_step
+from fusiongs.train.trained import Trained
 from fusiongs.train.truth_probe import probe_psnr, should_probe, truth_probe
-
-
-@dataclass
-class Trained:
-    """A finished (or interrupted) run."""
-
-    state: FusionState
-    data: TrainData
-    config: DeblurConfig
-    history: History
-    iteration: int
-    poses: PoseSamples
-    initial_thresholds: SensorThresholds | None = None  # where θ started (calibration)
-    # ``threshold.render_floor``'s ``(θ before, θ after)``, ``[2, C]`` host float64, when it ran
-    threshold_floor: tuple[torch.Tensor, torch.Tensor] | None = None
 
 
 def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
@@ -355,7 +341,7 @@ def frame_colour(scene: Scene, data: TrainData, cfg: DeblurConfig) -> torch.Tens
     colour it started with: the frame's mean is a measured guess, not an assumed grey. Colour
     events see each channel's changes, and there the near-black mean of a mostly unlit frame (with
     the colour rates scaled to it) kept the lit objects too dark: on the one-frame `dark` RGGB
-    scenes the grey start scored 1.5-3 dB higher (benchmarks/RESULTS.md, session 19).
+    scenes the grey start scored 1.5-3 dB higher.
     """
     mode = cfg.init.start_colour
     if mode == "auto":
@@ -389,7 +375,7 @@ def init_images(scene: Scene, data: TrainData, cfg: DeblurConfig,
 
 def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
                   calibration: SensorThresholds | None = None) -> SensorThresholds:
-    """Thresholds to start from (METHOD.md section 4): ``calibration`` when given, else the
+    """Thresholds to start from (docs/method.md section 4): ``calibration`` when given, else the
     estimate of ``fusiongs calibrate`` when ``threshold.estimate`` is on and there are events,
     else ``threshold.init`` for both polarities. One pair per CFA channel for colour events."""
     from fusiongs.events.thresholds import SensorThresholds
@@ -399,7 +385,8 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
         return calibration.for_sensor(cfa)
     if not (cfg.threshold.estimate and scene.events is not None and len(scene.events)):
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
-    from fusiongs.eval.calibrate import CalibrateOptions, estimate_thresholds
+    from fusiongs.calibrate.estimate import estimate_thresholds
+    from fusiongs.calibrate.options import CalibrateOptions
 
     opts = CalibrateOptions(unknown_scale=cfg.threshold.init)
     try:
@@ -410,19 +397,12 @@ def initial_theta(scene: Scene, data: TrainData, cfg: DeblurConfig,
         return SensorThresholds.uniform(cfg.threshold.init, cfg.threshold.init, cfa, "threshold.init")
 
 
-def auto_exposure(cfg: DeblurConfig, n_frames: int) -> bool:
-    """Whether renders get :func:`fusiongs.train.render_io.exposure_gain`: without frames (their
-    level is arbitrary: events measure changes of log intensity) unless ``output.exposure`` is
-    ``none``. With one frame the colour anchor fixes the level; with several, the blur loss."""
-    return n_frames == 0 and cfg.output.exposure == "auto"
-
-
 def censor_events(data: TrainData, cfg: DeblurConfig, theta0: SensorThresholds,
                   device: torch.device) -> torch.Tensor | None:
     """``[E]`` bool: the fast events, whose pixels' counts are lower bounds (``events.censor`` times
     the dead time; the calibration's estimate, else measured here); None when the stream shows no
     refractory floor."""
-    from fusiongs.events.stats import dead_time_us
+    from fusiongs.events.dead_time import dead_time_us
     from fusiongs.train.data import fast_events
 
     dead = detail_number(theta0, "dead_time_us")  # a calibration.json may come from elsewhere
@@ -493,7 +473,7 @@ def _regularisers(state: FusionState, cfg: DeblurConfig, n_frames: int) -> torch
     The pull is for scenes without frames only, whose events cannot fix θ's common scale. With a
     frame the scale is observable (the frame fixes the log contrast of the texture the events see
     move): on four one-frame tuning scenes θ then moved toward the truth, from 26-28 % low to
-    within 6 %, and from 33-44 % high to 23-24 % high (benchmarks/RESULTS.md, session 17).
+    within 6 %, and from 33-44 % high to 23-24 % high.
     """
     total = state.log_gain.new_zeros(())
     if cfg.threshold.regularise > 0 and n_frames == 0:

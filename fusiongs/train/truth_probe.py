@@ -1,5 +1,5 @@
 """PSNR against the scene's truth images while training: the ``psnr_truth`` curve of
-``history.jsonl`` (issue 18 §2), for simulated scenes whose ``gt/`` folder holds sharp images.
+``history.jsonl``, for simulated scenes whose ``gt/`` folder holds sharp images.
 
 Every ``output.truth_every`` iterations the current model is rendered at up to ``MAX_VIEWS``
 truth instants (requested renders and frame mid-exposures, evenly chosen) and scored on 8-bit sRGB:

@@ -284,10 +284,10 @@ def test_wide_frames_are_swept_at_a_coarser_resolution_on_the_same_surfaces():
                          [([1, 2, 4, 5], 3), ([2, 4, 5], 3), ([4], 3), ([1, 2, 4, 5, 6], 1)])
 def test_plane_sweep_cost_matches_its_plain_reference(views, sources, channels):
     """The fast cost (float32 planes, one channel for grey-as-RGB, the best sources by a sorting
-    network) against the plain float64 form of :mod:`fusiongs.camera._stereo_reference`, on real views
+    network) against the plain float64 form of :mod:`tests.reference.stereo`, on real views
     with true poses and on grey images stored as RGB; planes out to far beyond the scene so that
     sources lose the point (inf) at some pixels."""
-    from fusiongs.camera._stereo_reference import plane_sweep_cost as reference
+    from tests.reference.stereo import plane_sweep_cost as reference
 
     cam, c2w, images, _ = views
     images = images[..., :1].expand(-1, -1, -1, 3) if channels == 1 else images

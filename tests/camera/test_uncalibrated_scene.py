@@ -1,4 +1,4 @@
-"""scene.json without intrinsics and/or trajectory (FORMAT.md): loads as an UncalibratedCamera."""
+"""scene.json without intrinsics and/or trajectory (docs/scene-format.md): loads as an UncalibratedCamera."""
 
 from __future__ import annotations
 

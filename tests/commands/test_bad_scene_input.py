@@ -1,5 +1,5 @@
 """Bad scene folders as a new user's files arrive: every command that reads a scene refuses each in
-one stderr line naming the file (and key), with exit status 2 (issue 15)."""
+one stderr line naming the file (and key), with exit status 2."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""A second real recording end to end (issue 14): the DAVIS346 AEDAT4 file through ``fusiongs
+"""A second real recording end to end: the DAVIS346 AEDAT4 file through ``fusiongs
 convert`` and ``fusiongs deblur``. It is a camera on a tripod looking at a road (59 APS frames of
 500 µs, 78,830 events over 2.36 s, no trajectory): structure from motion has no parallax to work
 with, so the pose stage must find the camera static instead of stopping."""
@@ -11,9 +11,8 @@ import numpy as np
 
 from fusiongs.cli import main
 from fusiongs.io import load_scene
-from tests.conftest import real_file
-from tests.train.conftest import TINY
-from tests.train.test_poses_stage import cut_recording
+from tests.conftest import TINY, real_file
+from tests.pipeline.test_poses import cut_recording
 
 
 def test_davis346_recording_converts_and_deblurs_with_a_static_camera(tmp_path, capsys):

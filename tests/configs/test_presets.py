@@ -8,8 +8,8 @@ import pytest
 
 import fusiongs
 from fusiongs.configs import config_dir, preset_names, resolve_config_path
+from fusiongs.configs.load import load_config
 from fusiongs.errors import InputError
-from fusiongs.train.config import load_config
 from fusiongs.train.settings import DeblurConfig
 from tests.conftest import REPO_ROOT
 

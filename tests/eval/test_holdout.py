@@ -1,12 +1,12 @@
-"""Held-out frames (METHOD.md §6a): index rule, event counts, carrying with events, sharpness."""
+"""Held-out frames (docs/method.md §6a): index rule, event counts, carrying with events, sharpness."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from fusiongs.edi import event_count_samples
 from fusiongs.errors import InputError
-from fusiongs.eval.edi import event_count_samples
 from fusiongs.eval.holdout import (
     carried_exposure,
     carry_linear,

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from benchmarks.bench_holdout_edi_grid import held_out_scores, main
-from fusiongs.eval.edi import edi_deblur
+from fusiongs.edi import edi_deblur
 from fusiongs.eval.holdout import carried_exposure, kept_neighbours
 from fusiongs.eval.metrics import psnr
 from fusiongs.frames.response import linear_to_response
 from fusiongs.io.scene_io import save_scene
+from fusiongs.pipeline.deblur import split_holdout
 from fusiongs.sim.dvs import DVSParams
 from fusiongs.sim.simulate import SimConfig, run_simulation
-from fusiongs.train.pipeline import split_holdout
 
 TRUE = (0.2, 0.3)
 

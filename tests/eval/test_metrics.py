@@ -98,3 +98,28 @@ def test_affine_metrics_carry_delta_e00_after_the_fit(rng):
     assert res["mean"]["novel"]["fusiongs"]["delta_e00"] < 0.5
     assert "dE00" in format_table(res)
     assert "dE00" not in format_table(compare_methods({"fusiongs": {"novel_000": pred}}, {"novel_000": gt}))
+
+
+def test_global_affine_fit_is_one_fit_over_all_views():
+    from fusiongs.eval.metrics import global_affine_fit
+
+    rng = np.random.default_rng(3)
+    gts = [rng.uniform(0.1, 0.9, (6, 5, 3)) for _ in range(3)]
+    # one gain and offset per channel for every view: the joint fit recovers the truth exactly
+    preds = [(g - 0.05) / 1.7 for g in gts]
+    for f, g in zip(global_affine_fit(preds, gts), gts):
+        np.testing.assert_allclose(f, g, atol=1e-12)
+    # a second view brighter than the first: each view alone fits exactly, the joint fit cannot
+    preds = [gts[0] * 0.5, gts[1] * 0.5 + 0.2]
+    joint = global_affine_fit(preds, gts[:2])
+    assert max(np.abs(j - g).max() for j, g in zip(joint, gts[:2])) > 0.05
+    for p, g in zip(preds, gts[:2]):
+        np.testing.assert_allclose(affine_fit(p, g), g, atol=1e-12)
+
+
+def test_global_affine_fit_refuses_unequal_lists():
+    from fusiongs.errors import InputError
+    from fusiongs.eval.metrics import global_affine_fit
+
+    with pytest.raises(InputError, match="preds/gts"):
+        global_affine_fit([np.zeros((2, 2, 3))], [])

@@ -1,4 +1,4 @@
-"""The floor of a sensor's same-pixel intervals (:func:`fusiongs.events.stats.interval_floor`): a
+"""The floor of a sensor's same-pixel intervals (:func:`fusiongs.events.dead_time.interval_floor`): a
 step for a pixel whose level keeps every crossing, a rise without a step for a pixel held in reset."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fusiongs.events.stats import IntervalFloor, dead_time_us, interval_floor
+from fusiongs.events.dead_time import IntervalFloor, dead_time_us, interval_floor
 from fusiongs.events.stream import EventStream
 from fusiongs.sim import dvs
 

@@ -1,19 +1,14 @@
-"""The one-pass event kernels against their numpy specification (fusiongs/events/_reference.py)."""
+"""The one-pass event kernels against their numpy specification (tests/reference/event_kernels.py)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fusiongs.events import _reference as ref
-from fusiongs.events.stats import (
-    _median_interval,
-    dead_time_us,
-    fast_event_counts,
-    fast_event_mask,
-    time_gaps,
-)
+from fusiongs.events.dead_time import dead_time_us, fast_event_counts
+from fusiongs.events.stats import _median_interval, fast_event_mask, time_gaps
 from fusiongs.events.stream import EventStream
+from tests.reference import event_kernels as ref
 
 
 def _stream(n: int, seed: int, w: int = 7, h: int = 5, span: int = 20_000) -> EventStream:
@@ -79,7 +74,7 @@ def test_time_gaps_in_chunks_match_the_whole_diff(n, monkeypatch):
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("window", [(0.001, 0.009), (0.0, 0.02), (0.0071, 0.0072)])
 def test_exposure_counts_match_the_bincount(seed, window):
-    from fusiongs.eval.edi import event_count_samples
+    from fusiongs.edi import event_count_samples
 
     ev = _stream(4000, seed)
     s, e = window
@@ -95,7 +90,7 @@ def test_exposure_counts_match_the_bincount(seed, window):
 @pytest.mark.parametrize("dead", [0.0, 1.0, 40.0, 333.5])
 @pytest.mark.parametrize("burst_end", [False, True])
 def test_reset_weights_match_the_sorted_pixel_intervals(seed, dead, burst_end):
-    from fusiongs.events.stats import reset_weights
+    from fusiongs.events.dead_time import reset_weights
 
     ev = _stream(3000, seed)
     w = reset_weights(ev, dead, cap=4.0, burst_end=burst_end)
@@ -112,7 +107,7 @@ def test_reset_weights_match_the_sorted_pixel_intervals(seed, dead, burst_end):
 def test_a_reset_weight_is_the_crossings_at_a_steady_rate():
     """One pixel firing every d + theta / r: each event after the first stands for (theta + r d) /
     theta; the burst's last event adds the blind time after it, (w^2 - 1) / (2 w) on average."""
-    from fusiongs.events.stats import reset_weights
+    from fusiongs.events.dead_time import reset_weights
 
     d, gap = 500.0, 250.0  # dead time and time to a threshold after the release (µs): r d = 2 theta
     t = np.arange(6, dtype=np.int64) * int(d + gap)
@@ -131,7 +126,7 @@ def test_reset_weights_count_a_reset_pixels_change_on_ramps_that_stop():
     """The simulator's reset pixel (:func:`fusiongs.sim.dvs.dvs_events_reset`) on ramps of 0.3 to 3
     thresholds a dead time that stop after 2-8 ms: the weighted counts are 8 % short without the
     burst's end, within 3 % with it."""
-    from fusiongs.events.stats import reset_weights
+    from fusiongs.events.dead_time import reset_weights
     from fusiongs.sim.dvs import dvs_events_reset
 
     rng = np.random.default_rng(0)
@@ -150,7 +145,7 @@ def test_reset_weights_count_a_reset_pixels_change_on_ramps_that_stop():
 
 @pytest.mark.parametrize("seed", range(3))
 def test_weighted_counts_match_the_bincount(seed):
-    from fusiongs.eval.edi import event_count_samples
+    from fusiongs.edi import event_count_samples
 
     ev = _stream(4000, seed)
     w = np.random.default_rng(seed).uniform(1.0, 4.0, len(ev)).astype(np.float32)

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from fusiongs.eval.edi import event_count_samples
-from fusiongs.events import stats
+from fusiongs.edi import event_count_samples
+from fusiongs.events import dead_time, stats
 from fusiongs.events.stream import EventStream
 from fusiongs.train.data import event_indices
 
@@ -55,9 +55,9 @@ def test_whole_stream_passes_have_no_per_event_temporaries(stream, name, monkeyp
         "count_maps": lambda: stream.count_maps(),
         "window_counts": lambda: stream.count_maps(100_000, 1_900_000),
         "pixel_counts": lambda: stream.pixel_counts(),
-        "dead_time": lambda: np.asarray(stats.dead_time_us(stream)),
+        "dead_time": lambda: np.asarray(dead_time.dead_time_us(stream)),
         "fast_mask": lambda: stats.fast_event_mask(stream, 50.0),
-        "fast_counts": lambda: stats.fast_event_counts(stream, 50.0, np.arange(0, 2_000_001, 250_000)),
+        "fast_counts": lambda: dead_time.fast_event_counts(stream, 50.0, np.arange(0, 2_000_001, 250_000)),
         "time_gaps": lambda: stats.time_gaps(stream.t),
         "exposure_counts": lambda: event_count_samples(stream, 0.1, 1.9, 12),
         "event_indices": lambda: event_indices(stream, torch.device("cpu")),

@@ -139,7 +139,7 @@ def _random_evt3(rng, n_packets=400) -> tuple[bytes, int]:
 
 
 def test_evt3_reader_matches_the_numpy_reference_on_mixed_words(tmp_path):
-    from fusiongs.events.readers._evt_reference import read_prophesee_raw_numpy
+    from tests.reference.evt_decoder import read_prophesee_raw_numpy
 
     data, n = _random_evt3(np.random.default_rng(3))
     (tmp_path / "e.raw").write_bytes(b"% evt 3.0\n% geometry 2048x720\n" + data)

@@ -1,4 +1,4 @@
-"""Readers on the real recordings of ../shared/data/real (skipped when absent).
+"""Readers on the real recordings of ``conftest.real_data_dir()`` (skipped when absent).
 
 The README there lists counts, durations and ON fractions; the Prophesee reader (``faery``) is also
 compared event by event with an independent decoder (the numpy reference of ``_evt_reference``).
@@ -13,8 +13,8 @@ import pytest
 
 from fusiongs.errors import InputError
 from fusiongs.events.readers import read_aedat4, read_events, read_prophesee_raw
-from fusiongs.events.readers._evt_reference import read_prophesee_raw_numpy
 from tests.conftest import real_data_dir, real_file
+from tests.reference.evt_decoder import read_prophesee_raw_numpy
 
 # file, size override, events, duration (µs, rounded as in the README), ON fraction (3 decimals)
 CASES = [

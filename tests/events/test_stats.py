@@ -61,7 +61,7 @@ def _moving_grating(theta_sigma: float, seed: int = 0):
 
 
 def test_threshold_spread_measures_the_pixels_mismatch():
-    from fusiongs.events.stats import threshold_spread
+    from fusiongs.events.dead_time import threshold_spread
 
     ev, true_var = _moving_grating(0.04)
     var, n = threshold_spread(ev, np.zeros(ev.height * ev.width, bool))

@@ -130,7 +130,7 @@ def test_a_kept_full_support_gives_the_same_loss_and_is_the_blur_of_a_fully_vali
 
 def test_bad_lowpass_settings_are_one_line_naming_the_key():
     from fusiongs.errors import ConfigError
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
 
     with pytest.raises(ConfigError, match=r"events.lowpass_sigma: expected a finite number > 0"):
         resolve_config("event_only", ["events.lowpass_sigma=0"])

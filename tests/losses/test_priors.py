@@ -102,7 +102,7 @@ def test_intensity_prior_highpass_ignores_offsets_and_large_scales_not_texture()
 
 def test_anchor_highpass_setting_is_checked_and_off_by_default():
     from fusiongs.errors import ConfigError
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
 
     with pytest.raises(ConfigError, match=r"event_only.anchor_highpass: expected a finite number >= 0"):
         resolve_config("event_only", ["event_only.anchor_highpass=-1"])
@@ -147,7 +147,7 @@ def test_total_variation_prior_zero_on_flat_images_and_gradient_finite():
 
 def test_total_variation_prior_bad_input_and_setting():
     from fusiongs.errors import ConfigError
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
 
     with pytest.raises(InputError, match="space"):
         total_variation_prior(torch.rand(4, 4, 3), "linear")

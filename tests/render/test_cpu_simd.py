@@ -13,7 +13,7 @@ from fusiongs.render import _cpu_simd as S
 from fusiongs.render import rasterize
 from fusiongs.render._boxes import pixel_boxes, sorted_visible
 from fusiongs.render.cpu import CompositeCPU, _use_simd
-from fusiongs.render.reference import render_reference
+from tests.reference.render import render_reference
 from tests.render.scenes import make_scene
 
 

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from fusiongs.render import rasterize
-from fusiongs.render.reference import render_reference
+from tests.reference.render import render_reference
 from tests.render.scenes import make_scene
 
 NAMES = ("means", "quats", "scales", "opacities", "colors", "viewmats")

@@ -76,8 +76,8 @@ def test_relative_step_floor_keeps_non_positive_colours_movable():
 
 
 def test_colour_step_is_a_checked_config_choice():
+    from fusiongs.configs.load import load_config
     from fusiongs.errors import ConfigError
-    from fusiongs.train.config import load_config
     from fusiongs.train.settings import DeblurConfig
 
     assert load_config(DeblurConfig, None, ["optim.colour_step=relative"]).optim.colour_step == "relative"
@@ -92,7 +92,7 @@ def test_colour_step_is_a_checked_config_choice():
 def test_trainer_applies_the_relative_step_to_the_gaussians_only_when_configured():
     from types import SimpleNamespace
 
-    from fusiongs.train.config import load_config
+    from fusiongs.configs.load import load_config
     from fusiongs.train.settings import DeblurConfig
     from fusiongs.train.trainer import _optimise
 
@@ -119,7 +119,7 @@ def test_relative_step_is_the_configured_one_at_the_reference_level():
     # relative step leaves that level's change as the optimiser made it
     from types import SimpleNamespace
 
-    from fusiongs.train.config import load_config
+    from fusiongs.configs.load import load_config
     from fusiongs.train.settings import DeblurConfig
     from fusiongs.train.trainer import _optimise
 

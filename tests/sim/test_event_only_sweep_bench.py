@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from benchmarks.bench_event_only_diagnose import parse_sensor
+from benchmarks._sweep import parse_sensor
 from benchmarks.bench_event_only_sweep import format_change, main, sensor_tag
 
 
@@ -69,39 +69,3 @@ def test_twin_scene_changes_only_the_sensor_and_is_reused(tmp_path):
     assert len(load_scene(twin).events) >= len(load_scene(scene).events)  # no dead time drops nothing more
     stamp = (twin / "scene.json").stat().st_mtime_ns
     assert twin_scene(scene, "refractory_s=0") == twin and (twin / "scene.json").stat().st_mtime_ns == stamp
-
-
-def test_oracle_in_count_units_divides_the_residual(monkeypatch):
-    """``install_oracle(truth, units)``: the same pixels and targets, the mse divided by units²."""
-    from types import SimpleNamespace
-
-    import numpy as np
-    import torch
-
-    import fusiongs.train.step as step
-    from benchmarks.bench_event_only_diagnose import TrueLog, install_oracle
-
-    h, w = 4, 5
-    truth = TrueLog(np.array([0.0, 1.0]), np.stack([np.zeros(h * w), np.linspace(0, 1, h * w)]))
-    counts = torch.zeros(2, h, w)
-    counts[0, 1:3] = 1.0
-    data = SimpleNamespace(count_maps=lambda *_: counts, cfa_index=None)
-    ev = SimpleNamespace(pixels=12, frac_with_events=0.5, grey_weights=(0.3, 0.6, 0.1), log_eps=1e-3)
-    cfg = SimpleNamespace(events=ev)
-    lin_a = torch.full((h, w, 3), 0.2)
-    lin_b = torch.rand(h, w, 3, generator=torch.Generator().manual_seed(1)) * 0.5 + 0.1
-    losses = []
-    for units in (1.0, 0.25):
-        monkeypatch.setattr(step, "event_window_loss", None)
-        install_oracle(truth, units)
-        losses.append(float(step.event_window_loss(None, data, cfg, lin_a, lin_b, 0.0, 0.5,
-                                                   torch.Generator().manual_seed(0))))
-    assert losses[0] > 0 and np.isclose(losses[1], 16.0 * losses[0], rtol=1e-5)
-
-
-def test_oracle_counts_needs_the_oracle(tmp_path, capsys):
-    from benchmarks.bench_event_only_diagnose import main as diagnose
-
-    with pytest.raises(SystemExit) as e:
-        diagnose([str(tmp_path), str(tmp_path / "out"), "--oracle-counts"])
-    assert e.value.code == 2 and "--oracle-counts" in capsys.readouterr().err

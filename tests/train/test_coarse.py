@@ -10,9 +10,9 @@ import torch
 from fusiongs.camera.pinhole import PinholeCamera
 from fusiongs.errors import ConfigError
 from fusiongs.frames.response import linear_to_srgb, srgb_to_linear
+from fusiongs.pipeline.deblur import resolve_config
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.train.data import coarse_camera, downsample_frames, prepare_data
-from fusiongs.train.pipeline import resolve_config
 from fusiongs.train.state import build_state
 from fusiongs.train.step import training_step
 from fusiongs.train.trainer import _coarse, build_trajectory, train

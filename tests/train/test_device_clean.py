@@ -1,4 +1,4 @@
-"""Training is device-clean by construction: no tensor silently lands on the CPU (issue 15, part 1).
+"""Training is device-clean by construction: no tensor silently lands on the CPU.
 
 ``fusiongs deblur … device=cuda`` once crashed at the first event window because the trainer's
 generator lived on the CPU while the event count maps lived on the GPU. On a CPU-only machine that
@@ -26,10 +26,10 @@ from torch.overrides import TorchFunctionMode
 
 import fusiongs
 from fusiongs.errors import ConfigError, InputError
+from fusiongs.pipeline.deblur import resolve_config
 from fusiongs.render.gsplat_backend import gsplat_available
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.train.data import prepare_data
-from fusiongs.train.pipeline import resolve_config
 from fusiongs.train.trainer import train
 from tests.conftest import has_cuda
 
@@ -42,10 +42,10 @@ FACTORIES = {getattr(torch, n): n for n in (
 #: device, and why. Everything else in ``train`` must name its device.
 HOST_SIDE = {
     # threshold estimation (fusiongs calibrate) works on the numpy frames and events, once
-    ("fusiongs/eval/calibrate.py", "*"): "host estimate before the loop",
-    ("fusiongs/eval/calibrate_fit.py", "*"): "host estimate before the loop",
-    ("fusiongs/eval/calibrate_data.py", "*"): "host estimate before the loop",
-    ("fusiongs/eval/calibrate_model.py", "*"): "host estimate before the loop",
+    ("fusiongs/calibrate/estimate.py", "*"): "host estimate before the loop",
+    ("fusiongs/calibrate/fit.py", "*"): "host estimate before the loop",
+    ("fusiongs/calibrate/data.py", "*"): "host estimate before the loop",
+    ("fusiongs/calibrate/pixel_model.py", "*"): "host estimate before the loop",
     # the plane-sweep stereo initialisation runs on the host by design (stereo_points moves its
     # inputs to the CPU), once; initial_gaussians moves its points to the device
     ("fusiongs/camera/stereo.py", "*"): "host plane sweep before the loop",
@@ -260,8 +260,8 @@ SYNC_ALLOWED = {
     "save_checkpoint": "checkpoints",
     "_payload": "checkpoints (the payload's running PSNR copied to the host)",
     # the demosaic masks and kernels are copied to the device once per size (cached), which may
-    # be in the first step (session 20: the per-call copies of cfa.py and the B-spline basis of
-    # camera/trajectory.py are gone; not yet run on a GPU since)
+    # be in the first step (the per-call copies of cfa.py and the B-spline basis of
+    # camera/trajectory.py are gone; not yet checked on a GPU)
     "_bilinear_tensors": "first call per image size and device only",
 }
 cuda = pytest.mark.skipif(not has_cuda(), reason="needs a CUDA GPU")

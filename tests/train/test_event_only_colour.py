@@ -1,4 +1,4 @@
-"""Colour from events alone (issue 18): the one-frame colour anchor, ΔE00 after the affine fit, the
+"""Colour from events alone: the one-frame colour anchor, ΔE00 after the affine fit, the
 event loss across the α schedule, and bad event-only input."""
 
 from __future__ import annotations

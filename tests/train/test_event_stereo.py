@@ -10,10 +10,10 @@ import torch
 
 from fusiongs.camera.stereo import stereo_points
 from fusiongs.io.scene_io import load_scene
+from fusiongs.pipeline.deblur import resolve_config
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.data import event_stereo_images, prepare_data
-from fusiongs.train.pipeline import resolve_config
 from fusiongs.train.state import EVENT_ONLY_VIEWS, initial_gaussians
 from fusiongs.train.trainer import build_trajectory, frame_colour, init_images
 

@@ -1,4 +1,4 @@
-"""``kill -9`` at any moment of ``fusiongs deblur``, then ``--resume`` (issue 15 §3).
+"""``kill -9`` at any moment of ``fusiongs deblur``, then ``--resume``.
 
 One output folder, one real ``fusiongs deblur`` subprocess after another, each SIGKILLed at a
 chosen point and the next started with ``--resume``:
@@ -33,10 +33,10 @@ import torch
 
 from fusiongs.atomic import is_temporary
 from fusiongs.camera.tum import read_tum
+from fusiongs.configs.load import load_config
 from fusiongs.frames.image_io import read_image
 from fusiongs.scene.ply import load_ply
 from fusiongs.train.checkpoint import load_checkpoint
-from fusiongs.train.config import load_config
 from fusiongs.train.settings import DeblurConfig
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "killpg"), reason="needs POSIX process groups")
@@ -67,7 +67,7 @@ def park():
     os._exit(3)
 
 if point == "estimate":
-    import fusiongs.eval.calibrate as calibrate
+    import fusiongs.calibrate.estimate as calibrate
 
     def estimate_thresholds(*args, **kwargs):
         park()

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
+from fusiongs.pipeline.deblur import resolve_config
 from fusiongs.sim.simulate import SimConfig, run_simulation
-from fusiongs.train.pipeline import resolve_config
 from fusiongs.train.trainer import train
 
 BASE = ["init.n_points=200", "blur.n_samples=3", "events.warmup=3", "events.pixels=128",
@@ -75,7 +75,7 @@ def test_edi_prior_is_used_while_on(colour_scene, tmp_path):
 
 
 def test_threshold_starts_from_the_calibration_unless_disabled(colour_scene):
-    from fusiongs.eval.calibrate import estimate_thresholds
+    from fusiongs.calibrate.estimate import estimate_thresholds
     from fusiongs.events.thresholds import SensorThresholds
     from fusiongs.train.data import prepare_data
     from fusiongs.train.trainer import initial_theta
@@ -113,8 +113,8 @@ def test_censored_counts_train_on_a_refractory_sensor(tmp_path):
         # 3x3 neighbourhoods (scipy's maximum filter as the reference)
         from scipy.ndimage import maximum_filter
 
-        from fusiongs.events._reference import fast_event_mask
-        from fusiongs.events.stats import dead_time_us
+        from fusiongs.events.dead_time import dead_time_us
+        from tests.reference.event_kernels import fast_event_mask
 
         ev = tr.data.events  # threshold.estimate=false: the trainer measured the dead time itself
         fast = fast_event_mask(ev, 2.0 * dead_time_us(ev))
@@ -155,7 +155,7 @@ def test_censored_counts_train_on_a_refractory_sensor(tmp_path):
 
 def test_threshold_pull_is_for_scenes_without_frames_only():
     """``threshold.regularise`` pulls θ toward its start only when no frame fixes its scale: with a
-    frame in the scene the same θ offset costs nothing (session 17: the pull held one-frame scenes
+    frame in the scene the same θ offset costs nothing (the pull would hold one-frame scenes
     at an assumed scale 26-44 % off)."""
     from types import SimpleNamespace
 

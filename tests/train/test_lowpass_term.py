@@ -2,7 +2,7 @@
 
 ``lowpass_term`` takes every pair's counts from one cumulative count over the step's instants
 (``TrainData.cumulative_counts``) and every render's log once; the reference
-(``fusiongs.train._lowpass_reference``) is the term as first written: ``count_maps``,
+(``tests.reference.lowpass_pairwise``) is the term as first written: ``count_maps``,
 ``censored_map`` and ``delta_log`` for each pair.
 """
 
@@ -17,12 +17,12 @@ import torch
 
 from fusiongs.io import load_scene
 from fusiongs.losses.threshold import ContrastThreshold
+from fusiongs.pipeline.deblur import resolve_config
 from fusiongs.sim.simulate import SimConfig, run_simulation
 from fusiongs.sim.write import write_simulated_scene
-from fusiongs.train._lowpass_reference import lowpass_term_pairwise
 from fusiongs.train.data import prepare_data, square_dilate
 from fusiongs.train.lowpass_term import lowpass_term
-from fusiongs.train.pipeline import resolve_config
+from tests.reference.lowpass_pairwise import lowpass_term_pairwise
 
 CPU = torch.device("cpu")
 

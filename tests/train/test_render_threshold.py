@@ -196,7 +196,7 @@ def test_deblur_lifts_theta_to_the_floor_once_when_the_events_start(tiny_scene, 
 
     import fusiongs.train.render_threshold as rt
     from fusiongs.cli import main
-    from tests.train.conftest import TINY
+    from tests.conftest import TINY
 
     calls = []
 
@@ -220,7 +220,7 @@ def test_deblur_lifts_theta_to_the_floor_once_when_the_events_start(tiny_scene, 
 
 def test_no_windows_is_refused_naming_the_key():
     from fusiongs.errors import ConfigError
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
 
     with pytest.raises(ConfigError, match="threshold.render_floor_windows"):
         resolve_config(None, ["threshold.render_floor_windows=0"])

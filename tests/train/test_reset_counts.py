@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from fusiongs.events.stats import reset_weights
+from fusiongs.events.dead_time import reset_weights
 from fusiongs.events.thresholds import SensorThresholds
 from fusiongs.io.scene_io import load_scene
 from fusiongs.sim.dvs import DVSParams
@@ -99,7 +99,7 @@ def test_a_reset_calibration_from_elsewhere_with_a_bad_number_is_a_named_error(d
 
 
 def test_edi_counts_a_reset_pixels_events_as_the_calibration_did(scene):
-    from fusiongs.eval.edi import edi_deblur, edi_scene
+    from fusiongs.edi import edi_deblur, edi_scene
 
     th = _theta(pixel_model="reset (auto)", dead_time_us=400.0, reset_weight_cap=3.0, reset_burst_end=True)
     got = edi_scene(scene, th, n_samples=8)
@@ -116,8 +116,8 @@ def test_edi_counts_a_reset_pixels_events_as_the_calibration_did(scene):
 
 
 def test_edi_refuses_a_reset_calibration_with_a_bad_dead_time(scene):
+    from fusiongs.edi import edi_scene
     from fusiongs.errors import InputError
-    from fusiongs.eval.edi import edi_scene
 
     with pytest.raises(InputError, match="dead_time_us"):
         edi_scene(scene, _theta(pixel_model="reset", dead_time_us="400"), n_samples=4)

@@ -115,7 +115,7 @@ def _window_data(n_events: int, frame_interval: float, span: float = 2.0):
     (["events.window_events=4"], 0, 2.0, 2.0),                  # no events: no rate to cap by
 ])
 def test_the_longest_free_window(overrides, n_events, frame_interval, want):
-    from fusiongs.train.pipeline import resolve_config
+    from fusiongs.pipeline.deblur import resolve_config
     from fusiongs.train.step import longest_free_window
 
     got = longest_free_window(resolve_config(None, overrides), _window_data(n_events, frame_interval))

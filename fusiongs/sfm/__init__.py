@@ -1,0 +1,1 @@
+"""Poses and intrinsics from the data: COLMAP registration (pycolmap), focal profile, alignment."""
