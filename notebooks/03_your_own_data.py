@@ -79,7 +79,7 @@ def find_recording(name="eslnet_cups"):
 
 
 RECORDING = find_recording()
-print("recording:", RECORDING or "not found")
+print("recording:", RECORDING.name if RECORDING else "not found")
 
 # %% [markdown]
 # **If the recording is not found** (for example in CI without the shared data), the notebook goes

@@ -17,6 +17,17 @@ from fusiongs.sim.write import write_simulated_scene
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
+def docs_script(name: str):
+    """A script of docs/ (``gen_commands``, ``build_tutorials``) loaded as a module (docs/ is not a
+    package)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, REPO_ROOT / "docs" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def real_data_dir() -> Path:
     """The real recordings (third-party, never committed): the folder shared/data/real beside the
     repository, or the FUSIONGS_REAL_DATA environment variable when it is set."""

@@ -6,18 +6,16 @@ so a changed option or help text must be followed by regenerating them.
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+
+from tests.conftest import docs_script
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def load_generator():
-    """docs/gen_commands.py as a module (docs/ is not a package)."""
-    spec = importlib.util.spec_from_file_location("gen_commands", ROOT / "docs" / "gen_commands.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """docs/gen_commands.py as a module."""
+    return docs_script("gen_commands")
 
 
 def test_commands_md_is_generated_from_the_parsers():

@@ -99,8 +99,8 @@ def test_deblur_writes_the_refined_path_that_loads_as_a_scene_trajectory(tiny_sc
 def test_resume_after_the_pose_stage_starts_from_the_initial_path(tiny_scene, tmp_path, monkeypatch):
     """The pose stage's path is trajectory_initial.txt; the refined trajectory.txt written after
     training must not replace it as the starting point of a resumed run."""
-    from fusiongs.sfm.register import PoseEstimate, PoseReport
     from fusiongs.pipeline import poses as poses_stage
+    from fusiongs.sfm.register import PoseEstimate, PoseReport
     from fusiongs.train.checkpoint import load_checkpoint
 
     scene_dir = tmp_path / "scene"
