@@ -8,7 +8,9 @@ HELP = "fit a 3DGS scene and trajectory to blurry frames and events; write sharp
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("scene", help="scene folder (scene.json; see docs/scene-format.md)")
+    p.add_argument("scene", help="scene folder (scene.json; see docs/scene-format.md), or a folder of scene "
+                                 "folders (a dataset: each is deblurred into OUT/<name>/, with one table "
+                                 "in OUT/summary.json)")
     p.add_argument("-o", "--output", "--out", dest="out", default=None, help="output folder (required)")
     p.add_argument("--config", default=None,
                    help="YAML config: a path or a preset name (deblur, deblur_fast, deblur_quality, "
@@ -22,6 +24,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "(OUT/heldout.json); K >= 2, 0 = off (default)")
     p.add_argument("--print-config", action="store_true",
                    help="print the merged config (defaults, --config, overrides) as YAML and exit")
+    p.add_argument("--jobs", type=int, default=0, metavar="N",
+                   help="a dataset: recordings deblurred at once, each in its own process "
+                        "(default 0: one per CPU core)")
+    p.add_argument("--executor", default="local", choices=("local", "serial"),
+                   help="a dataset: where the recordings run: local worker processes (default) or "
+                        "one after another in this process")
     p.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. optim.iterations=500 events.loss=band")
 
@@ -37,6 +45,15 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("command line", "-o/--output", "an output folder")
+    from pathlib import Path
+
+    from fusiongs.pipeline.dataset import run_dataset
+
+    if Path(args.scene).is_dir() and not (Path(args.scene) / "scene.json").exists():  # a dataset
+        run_dataset(args.scene, args.out, config=args.config, overrides=args.overrides,
+                    calibration=args.calibration, holdout=args.holdout, resume=args.resume,
+                    jobs=args.jobs, executor=args.executor)
+        return 0
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
                calibration=args.calibration, holdout=args.holdout)
     return 0
