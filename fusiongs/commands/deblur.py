@@ -27,9 +27,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--jobs", type=int, default=0, metavar="N",
                    help="a dataset: recordings deblurred at once, each in its own process "
                         "(default 0: one per CPU core)")
-    p.add_argument("--executor", default="local", choices=("local", "serial"),
-                   help="a dataset: where the recordings run: local worker processes (default) or "
-                        "one after another in this process")
+    p.add_argument("--executor", default="local", choices=("local", "serial", "dask"),
+                   help="a dataset: where the recordings run: local worker processes (default), one "
+                        "after another in this process, or a Dask cluster (pip install -e \".[cluster]\")")
+    p.add_argument("--address", default=None, metavar="tcp://HOST:PORT",
+                   help="--executor dask: the scheduler of a running Dask cluster whose workers see "
+                        "the same files (default: start a local cluster of --jobs workers)")
     p.add_argument("overrides", nargs="*", metavar="key=value",
                    help="config overrides, e.g. optim.iterations=500 events.loss=band")
 
@@ -52,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     if Path(args.scene).is_dir() and not (Path(args.scene) / "scene.json").exists():  # a dataset
         run_dataset(args.scene, args.out, config=args.config, overrides=args.overrides,
                     calibration=args.calibration, holdout=args.holdout, resume=args.resume,
-                    jobs=args.jobs, executor=args.executor)
+                    jobs=args.jobs, executor=args.executor, address=args.address)
         return 0
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
                calibration=args.calibration, holdout=args.holdout)

@@ -125,7 +125,8 @@ def format_summary(rows: Sequence[dict]) -> str:
 def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None = None,
                 overrides: Sequence[str] = (), calibration: str | Path | None = None,
                 holdout: int | str | None = None, resume: bool = False, jobs: int | None = None,
-                executor: str = "local", log: Callable[..., None] = print) -> list[dict]:
+                executor: str = "local", address: str | None = None,
+                log: Callable[..., None] = print) -> list[dict]:
     """Deblur every recording of a dataset folder (see the module docstring); returns the rows.
 
     Raises:
@@ -160,7 +161,7 @@ def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None 
         what = row.get("error") or f"{row['wall_seconds'] / 60:.1f} min"
         log(f"{row['name']}: {row['status']} ({what})")
 
-    for row in run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done):
+    for row in run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done, address=address):
         rows[row["name"]] = row
     ordered = [rows[s.name] for s in scenes]
     write_text(out / SUMMARY_FILE, json.dumps({"root": str(root), "recordings": ordered}, indent=2) + "\n")

@@ -32,6 +32,29 @@ def test_run_pieces_keeps_the_order_of_the_tasks_in_every_executor():
         run_pieces(operator.neg, tasks, jobs=2, executor="cluster")
     with pytest.raises(InputError, match="--jobs"):
         run_pieces(operator.neg, tasks, jobs=0)
+    with pytest.raises(InputError, match="--address"):
+        run_pieces(operator.neg, tasks, jobs=2, address="tcp://127.0.0.1:1")
+
+
+def test_dask_runs_the_pieces_on_a_cluster_started_for_the_run_or_given_by_address():
+    distributed = pytest.importorskip("distributed")
+    tasks = [3, -1, 7]
+    assert run_pieces(operator.neg, tasks, jobs=2, executor="dask") == [-3, 1, -7]
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        assert run_pieces(operator.neg, tasks, jobs=1, executor="dask",
+                          address=cluster.scheduler_address) == [-3, 1, -7]
+
+
+def test_an_unreachable_dask_scheduler_is_one_line_and_exit_2(tmp_path, capsys):
+    pytest.importorskip("distributed")
+    data = tmp_path / "data"
+    (data / "a").mkdir(parents=True)
+    (data / "a" / "scene.json").write_text("{}")
+    code = main(["deblur", str(data), "-o", str(tmp_path / "out"), "--executor", "dask",
+                 "--address", "tcp://127.0.0.1:9"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--address" in err[0] and "127.0.0.1:9" in err[0]
 
 
 def test_dataset_scenes_are_the_subfolders_with_a_scene_json(tmp_path):
@@ -77,3 +100,21 @@ def test_a_dataset_runs_in_parallel_isolates_a_failure_and_resumes(tiny_scene, t
     summary = json.loads((out / SUMMARY_FILE).read_text())["recordings"]
     assert [r["status"] for r in summary] == ["done", "done"] and summary[0].get("resumed")
     assert "first" in format_summary(summary) and "second" in format_summary(summary)
+
+
+@pytest.mark.slow
+def test_a_dataset_runs_on_a_dask_cluster_the_test_starts(tiny_scene, tmp_path):
+    distributed = pytest.importorskip("distributed")
+    data, out = tmp_path / "data", tmp_path / "out"
+    for name in ("one", "two"):
+        shutil.copytree(tiny_scene, data / name)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        assert main(["deblur", str(data), "-o", str(out), "--executor", "dask",
+                     "--address", cluster.scheduler_address, *TINY]) == 0
+    summary = json.loads((out / SUMMARY_FILE).read_text())["recordings"]
+    assert [(r["name"], r["status"]) for r in summary] == [("one", "done"), ("two", "done")]
+    for name in ("one", "two"):
+        metrics = json.loads((out / name / "metrics.json").read_text())
+        assert summary[0 if name == "one" else 1]["psnr"] == {
+            m: v["psnr"] for m, v in metrics["mean"]["deblur"].items()}
