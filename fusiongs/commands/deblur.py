@@ -25,11 +25,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--print-config", action="store_true",
                    help="print the merged config (defaults, --config, overrides) as YAML and exit")
     p.add_argument("--jobs", type=int, default=0, metavar="N",
-                   help="a dataset: recordings deblurred at once, each in its own process "
-                        "(default 0: one per CPU core)")
+                   help="a dataset, or a recording in time chunks (chunk.seconds): pieces deblurred "
+                        "at once, each in its own process (default 0: one per CPU core)")
     p.add_argument("--executor", default="local", choices=("local", "serial", "dask"),
-                   help="a dataset: where the recordings run: local worker processes (default), one "
-                        "after another in this process, or a Dask cluster (pip install -e \".[cluster]\")")
+                   help="a dataset or chunks: where the pieces run: local worker processes (default), "
+                        "one after another in this process, or a Dask cluster "
+                        "(pip install -e \".[cluster]\")")
     p.add_argument("--address", default=None, metavar="tcp://HOST:PORT",
                    help="--executor dask: the scheduler of a running Dask cluster whose workers see "
                         "the same files (default: start a local cluster of --jobs workers)")
@@ -57,6 +58,16 @@ def run(args: argparse.Namespace) -> int:
                     calibration=args.calibration, holdout=args.holdout, resume=args.resume,
                     jobs=args.jobs, executor=args.executor, address=args.address)
         return 0
+    cfg = resolve_config(args.config, args.overrides)
+    if cfg.chunk.seconds > 0:  # a long recording: in overlapping time chunks when it is longer
+        from fusiongs.io.scene_io import load_scene
+        from fusiongs.pipeline.chunks import plan_chunks, run_chunked, scene_span
+
+        if len(plan_chunks(*scene_span(load_scene(args.scene)), cfg.chunk.seconds, cfg.chunk.overlap)) > 1:
+            run_chunked(args.scene, args.out, config=args.config, overrides=args.overrides,
+                        calibration=args.calibration, holdout=args.holdout, resume=args.resume,
+                        jobs=args.jobs, executor=args.executor, address=args.address)
+            return 0
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
                calibration=args.calibration, holdout=args.holdout)
     return 0

@@ -265,6 +265,21 @@ class OutputSettings:
 
 
 @dataclass
+class ChunkSettings:
+    seconds: float = 0.0             # a recording longer than this is deblurred in overlapping time
+                                     # chunks, each with its own Gaussians and path (pipeline/chunks.py);
+                                     # 0 = one piece whatever the length
+    overlap: float = 1.0             # seconds shared by neighbouring chunks (a frame is taken from the
+                                     # chunk in whose middle it lies)
+
+    def __post_init__(self) -> None:
+        _need_positive("chunk", self, ("seconds", "overlap"), zero_ok=True)
+        if self.seconds and self.overlap >= self.seconds:
+            raise ConfigError("config", "chunk.overlap", f"less than chunk.seconds ({self.seconds:g})",
+                              repr(self.overlap))
+
+
+@dataclass
 class DeblurConfig:
     seed: int = 0
     backend: Literal["auto", "torch", "cpu", "gsplat"] = "auto"
@@ -280,3 +295,4 @@ class DeblurConfig:
     optim: OptimSettings = field(default_factory=OptimSettings)
     densify: DensifySettings = field(default_factory=DensifySettings)
     output: OutputSettings = field(default_factory=OutputSettings)
+    chunk: ChunkSettings = field(default_factory=ChunkSettings)
