@@ -75,6 +75,8 @@ check "bench_data.py --evt3-large" --refuse "DIFFER" -- \
   "$PY" $B/bench_data.py --evt3-large 20000 --tmp "$T"
 check bench_deblur.py -- "$PY" $B/bench_deblur.py --smoke --presets boxes --seeds 0 --cfa none,RGGB \
   --out "$T/deblur" "${TINY[@]}"
+check bench_walk.py -- "$PY" $B/bench_walk.py --smoke --split tuning --seeds 0 --duration 0.6 --frames 8 \
+  --chunks 0,0.3 --root "$T/walk" -- "${TINY[@]}" chunk.overlap=0.1
 check bench_event_only_sweep.py -- "$PY" $B/bench_event_only_sweep.py --split test --seeds 1000 \
   --size 48x36 --duration 0.3 --root "$T/event_only" --json "$T/event_only.json" "${TINY[@]}"
 check "bench_gpu.py render" --note "CPU: --device cpu" -- \

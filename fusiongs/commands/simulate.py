@@ -33,7 +33,9 @@ _SWEEP_DRAWN = ("preset", "cfa", "seed", "frame_response", "exposure", "events_t
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--output", required=True, help="scene folder to write")
     parser.add_argument("--preset", default=None,
-                        help="scene: boxes, wall, corridor, gallery, dark or depth (default boxes)")
+                        help="scene: boxes, wall, corridor, gallery, dark or depth (default boxes); "
+                             "walks whose view keeps changing: hallway, walkway (20 s each: "
+                             "--duration 20 --frames 240)")
     parser.add_argument("--cfa", default=None,
                         help="event CFA: RGGB, BGGR, GRBG, GBRG or none (default none: grey)")
     parser.add_argument("--seed", default=None, help="random seed (default 0)")

@@ -17,6 +17,15 @@ along +z. Each preset differs in geometry, textures and motion:
 - ``depth``: thin posts and a box 1.2 to 2 m away, boxes at 8 and 14 m, a far wall at 40 m and a
   floor between them; a sideways slide looking at the far wall (image speed falls with depth:
   strong parallax).
+
+Two walks, whose view keeps changing (record them long: ``--duration 20 --frames 240``):
+
+- ``hallway``: a 20 m corridor of five 4 m segments, each with its own wall, floor and ceiling
+  textures, posters and boxes along it and an end wall; the camera walks 10 m down it in 20 s
+  (0.5 m/s) with a walker's sway, so walls, floor and the end wall keep coming into view.
+- ``walkway``: a 24 m wall of photo panels 3 m to the camera's side of a pavement, with posts in
+  front of it; the camera walks 10 m along it in 20 s looking at it, so every few seconds the whole
+  view is new.
 """
 
 from __future__ import annotations
@@ -176,8 +185,69 @@ def depth() -> Preset:
     return Preset(World(tuple(quads), tex), motion, 62.0)
 
 
+WALK_SHAKE = {"shake_pos": 0.012, "shake_rot_deg": 0.6, "shake_hz": (1.5, 8.0)}  # a walker's sway
+
+
+def hallway() -> Preset:
+    """Walk 10 m down a 20 m corridor of five differently textured segments in 20 s."""
+    names = ("brick", "coffee", "gravel", "grass", "hubble_deep_field", "chelsea", "immunohistochemistry",
+             "rocket", "astronaut", "page", "coins", "text", "colorwheel", "camera")
+    tints = {"brick": (0.8, 0.75, 0.7), "gravel": (0.6, 0.6, 0.65), "grass": (0.9, 0.95, 0.8),
+             "page": (0.95, 0.9, 0.8), "coins": (0.9, 0.85, 0.7)}
+    tex = tuple(load_photo(n, tints.get(n, (1.0, 1.0, 1.0))) for n in names)
+    seg, n_seg = 4.0, 5
+    walls = ((0, 1), (9, 5), (11, 0), (1, 10), (5, 9))  # (left, right) texture of each segment
+    floors, ceilings = (2, 3, 2, 10, 3), (3, 11, 4, 3, 11)
+    quads = []
+    for i in range(n_seg):
+        z0, z1 = i * seg, (i + 1) * seg
+        crop = (0.1 * i, 0.0, 0.1 * i + 0.5, 1.0)  # the same photo differs from segment to segment
+        quads += [
+            _plane((-1.5, -1.5, z0), (0, 0, seg), (0, 2.7, 0), walls[i][0], crop=crop),  # left wall
+            _plane((1.5, -1.5, z1), (0, 0, -seg), (0, 2.7, 0), walls[i][1], crop=crop),  # right wall
+            _plane((-1.5, 1.2, z0), (3.0, 0, 0), (0, 0, seg), floors[i], crop=crop),  # floor (y = 1.2)
+            _plane((-1.5, -1.5, z1), (3.0, 0, 0), (0, 0, -seg), ceilings[i], 0.8, crop),  # ceiling
+            _plane((-1.49, -0.9, z0 + 1.2), (0, 0, 1.4), (0, 1.1, 0), (6, 7, 8, 12, 13)[i], 1.1),  # posters
+            _plane((1.49, -0.7, z0 + 2.9), (0, 0, -1.2), (0, 1.0, 0), (8, 12, 6, 13, 7)[i], 1.1),
+        ]
+    quads += [
+        _plane((-1.5, -1.5, seg * n_seg), (3.0, 0, 0), (0, 2.7, 0), 4),  # end wall (z = 20)
+        *_box((0.7, 0.8, 6.5), (0.6, 0.8, 0.6), 8),
+        *_box((-0.8, 0.85, 13.0), (0.7, 0.7, 0.5), 12),
+        *_box((0.6, 0.9, 17.5), (0.5, 0.6, 0.5), 1),
+    ]
+    motion = Motion(target=(0.0, 0.0, 40.0), radius=(39.5, 39.5), azimuth_deg=(0.0, 0.0),
+                    height=(-0.3, -0.3), target_shift=(0.0, 0.0, 10.0), look_shift=(1.5, 0.0, 0.0),
+                    period=20.0, **WALK_SHAKE)
+    return Preset(World(tuple(quads), tex), motion, 66.0)
+
+
+def walkway() -> Preset:
+    """Walk 10 m along a 24 m wall of photo panels in 20 s, looking at it."""
+    names = ("astronaut", "coffee", "chelsea", "rocket", "hubble_deep_field", "immunohistochemistry",
+             "page", "coins", "text", "colorwheel", "camera", "brick", "gravel", "grass")
+    tints = {"brick": (0.85, 0.6, 0.45), "gravel": (0.7, 0.7, 0.72), "grass": (0.75, 0.9, 0.6),
+             "page": (0.95, 0.9, 0.8), "coins": (0.9, 0.85, 0.7)}
+    tex = tuple(load_photo(n, tints.get(n, (1.0, 1.0, 1.0))) for n in names)
+    quads = []
+    for i in range(6):  # pavement (y = 1.4) and the wall behind the panels (z = 3), 4 m tiles
+        crop = (0.08 * i, 0.0, 0.08 * i + 0.5, 1.0)
+        quads += [_plane((-12 + 4.0 * i, 1.4, -1.0), (4.0, 0, 0), (0, 0, 4.0), 12 + i % 2, crop=crop),
+                  _plane((-12 + 4.0 * i, -3.0, 3.02), (4.0, 0, 0), (0, 4.4, 0), 11, crop=crop)]
+    for i in range(12):  # a panel every 2 m, at alternating heights and sizes
+        x0 = -12.0 + 2.0 * i + 0.2
+        w, h = (1.6, 1.4) if i % 2 == 0 else (1.3, 1.8)
+        quads.append(_plane((x0, -1.9 + 0.3 * (i % 3), 3.0), (w, 0, 0), (0, h, 0), i % 11))
+    for i in range(6):  # posts 1.5 m in front of the wall
+        quads += _box((-10.0 + 4.0 * i, 0.4, 1.5), (0.12, 2.0, 0.12), 13)
+    motion = Motion(target=(-5.0, 0.0, 10.0), radius=(10.0, 10.0), azimuth_deg=(0.0, 0.0),
+                    height=(-0.2, -0.2), target_shift=(10.0, 0.0, 0.0), period=20.0, **WALK_SHAKE)
+    return Preset(World(tuple(quads), tex), motion, 62.0)
+
+
 PRESETS: dict[str, Callable[[], Preset]] = {"boxes": boxes, "wall": wall, "corridor": corridor,
-                                            "gallery": gallery, "dark": dark, "depth": depth}
+                                            "gallery": gallery, "dark": dark, "depth": depth,
+                                            "hallway": hallway, "walkway": walkway}
 
 
 def get_preset(name: str) -> Preset:

@@ -19,7 +19,7 @@ def _mid_render(preset: str, width: int = 64, height: int = 48):
     return r, c2w, r.render(0.5).numpy()
 
 
-@pytest.mark.parametrize("name", ["gallery", "dark", "depth"])
+@pytest.mark.parametrize("name", ["gallery", "dark", "depth", "hallway"])
 def test_new_presets_simulate_a_tiny_scene_with_events_frames_and_truth(name):
     res = run_simulation(tiny_config(preset=name, duration=0.06, frames=1, exposure=0.02, novel=1,
                                      dvs=DVSParams(ba_rate_hz=0.0)))
@@ -30,7 +30,7 @@ def test_new_presets_simulate_a_tiny_scene_with_events_frames_and_truth(name):
 
 
 def test_all_presets_are_registered():
-    assert {"boxes", "wall", "corridor", "gallery", "dark", "depth"} <= set(PRESETS)
+    assert {"boxes", "wall", "corridor", "gallery", "dark", "depth", "hallway", "walkway"} <= set(PRESETS)
 
 
 def test_dark_preset_is_mostly_dark_with_a_few_bright_objects():
@@ -52,3 +52,14 @@ def test_gallery_has_fine_texture_at_the_default_resolution():
     g = np.log(img @ np.array([0.299, 0.587, 0.114], dtype=np.float32) + 1e-3)
     lap = g[1:-1, 1:-1] - 0.25 * (g[:-2, 1:-1] + g[2:, 1:-1] + g[1:-1, :-2] + g[1:-1, 2:])
     assert np.abs(lap).mean() > 0.13
+
+
+@pytest.mark.parametrize("name", ["hallway", "walkway"])
+def test_a_walk_covers_10_m_in_20_s_and_its_view_is_new_at_the_end(name):
+    r = scene_renderer(tiny_config(preset=name, width=48, height=36, duration=20.0, frames=240,
+                                   exposure=0.06))
+    c2w = r.trajectory.c2w(np.array([0.0, 10.0, 20.0]))
+    walked = np.linalg.norm(c2w[1:, :3, 3] - c2w[:-1, :3, 3], axis=1)
+    assert np.all(np.abs(walked - 5.0) < 0.2)
+    first, last = r.render(0.0).numpy(), r.render(20.0).numpy()
+    assert np.corrcoef(first.ravel(), last.ravel())[0, 1] < 0.5
