@@ -64,15 +64,20 @@ TINY = ["init.n_points=300", "blur.n_samples=3", "events.warmup=4", "events.pixe
         "densify.stop=9", "output.progress=false", "output.checkpoint_every=0"]
 
 
+def simulated_scene(root, **config):
+    """Simulate a boxes scene (32x24, 2 frames of 0.12 s unless ``config`` says otherwise) and
+    write it, with its truth, to the folder ``root``; returns ``root``."""
+    base = {"preset": "boxes", "width": 32, "height": 24, "duration": 0.12, "frames": 2, "exposure": 0.03,
+            "dvs_rate_hz": 500.0, "blur_samples": 6, "supersample": 1, "novel": 1, "seed": 1}
+    res = run_simulation(SimConfig(**(base | config)))
+    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    return root
+
+
 @pytest.fixture(scope="module")
 def tiny_scene(tmp_path_factory):
     """A 32x24 boxes scene with 2 frames, events, trajectory and truth (written to a folder)."""
-    root = tmp_path_factory.mktemp("scene")
-    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.12, frames=2, exposure=0.03,
-                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
-    res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
-    return root
+    return simulated_scene(tmp_path_factory.mktemp("scene"))
 
 
 @pytest.fixture(scope="module")

@@ -12,9 +12,7 @@ from fusiongs.errors import ConfigError
 from fusiongs.io.scene_io import load_scene
 from fusiongs.pipeline.chunks import CHUNKS_FILE, check_chunks, chunk_scene, owners, plan_chunks, scene_span
 from fusiongs.pipeline.dataset import PIECE_FILE
-from fusiongs.sim.simulate import SimConfig, run_simulation
-from fusiongs.sim.write import write_simulated_scene
-from tests.conftest import TINY
+from tests.conftest import TINY, simulated_scene
 
 CHUNKED = ["chunk.seconds=0.3", "chunk.overlap=0.1"]
 
@@ -37,12 +35,8 @@ def test_an_instant_belongs_to_the_chunk_in_whose_middle_it_lies():
 @pytest.fixture(scope="module")
 def long_scene(tmp_path_factory):
     """A 32x24 boxes recording of 0.6 s with 8 frames, events, trajectory and truth."""
-    root = tmp_path_factory.mktemp("long")
-    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.6, frames=8, exposure=0.03,
-                    dvs_rate_hz=400.0, blur_samples=4, supersample=1, novel=2, seed=2)
-    res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
-    return root
+    return simulated_scene(tmp_path_factory.mktemp("long"), duration=0.6, frames=8, dvs_rate_hz=400.0,
+                           blur_samples=4, novel=2, seed=2)
 
 
 def test_a_chunk_holds_its_whole_exposures_its_events_and_a_path_around_it(long_scene):

@@ -14,11 +14,9 @@ from fusiongs.configs.load import load_config
 from fusiongs.frames.image_io import read_image
 from fusiongs.io import load_scene
 from fusiongs.scene.ply import load_ply
-from fusiongs.sim.simulate import SimConfig, run_simulation
-from fusiongs.sim.write import write_simulated_scene
 from fusiongs.train.checkpoint import load_checkpoint
 from fusiongs.train.settings import DeblurConfig
-from tests.conftest import TINY
+from tests.conftest import TINY, simulated_scene
 
 
 def test_deblur_writes_every_output(tiny_scene, tiny_run):
@@ -146,11 +144,7 @@ def three_frames_no_truth(tmp_path_factory):
     """Three blurry frames with events and a trajectory, but no gt/ (as a real recording)."""
     import shutil
 
-    root = tmp_path_factory.mktemp("scene3")
-    cfg = SimConfig(preset="boxes", width=32, height=24, duration=0.15, frames=3, exposure=0.03,
-                    dvs_rate_hz=500.0, blur_samples=6, supersample=1, novel=1, seed=1)
-    res = run_simulation(cfg)
-    write_simulated_scene(res.scene, res.gt, root, stats=res.stats, overwrite=True)
+    root = simulated_scene(tmp_path_factory.mktemp("scene3"), duration=0.15, frames=3)
     shutil.rmtree(root / "gt")
     return root
 
