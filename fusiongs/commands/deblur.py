@@ -49,6 +49,11 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise InputError("command line", "-o/--output", "an output folder")
+    if args.jobs < 0:
+        raise InputError("command line", "--jobs", "a number of workers >= 0 (0: one per core)", args.jobs)
+    if args.address and args.executor != "dask":
+        raise InputError("command line", "--address", "--executor dask with a scheduler address",
+                         args.address)
     from pathlib import Path
 
     from fusiongs.pipeline.dataset import run_dataset
@@ -58,16 +63,13 @@ def run(args: argparse.Namespace) -> int:
                     calibration=args.calibration, holdout=args.holdout, resume=args.resume,
                     jobs=args.jobs, executor=args.executor, address=args.address)
         return 0
-    cfg = resolve_config(args.config, args.overrides)
-    if cfg.chunk.seconds > 0:  # a long recording: in overlapping time chunks when it is longer
-        from fusiongs.io.scene_io import load_scene
-        from fusiongs.pipeline.chunks import plan_chunks, run_chunked, scene_span
+    if resolve_config(args.config, args.overrides).chunk.seconds > 0:  # in time chunks when longer
+        from fusiongs.pipeline.chunks import run_chunked
 
-        if len(plan_chunks(*scene_span(load_scene(args.scene)), cfg.chunk.seconds, cfg.chunk.overlap)) > 1:
-            run_chunked(args.scene, args.out, config=args.config, overrides=args.overrides,
-                        calibration=args.calibration, holdout=args.holdout, resume=args.resume,
-                        jobs=args.jobs, executor=args.executor, address=args.address)
-            return 0
+        run_chunked(args.scene, args.out, config=args.config, overrides=args.overrides,
+                    calibration=args.calibration, holdout=args.holdout, resume=args.resume,
+                    jobs=args.jobs, executor=args.executor, address=args.address)
+        return 0
     run_deblur(args.scene, args.out, config=args.config, overrides=args.overrides, resume=args.resume,
                calibration=args.calibration, holdout=args.holdout)
     return 0

@@ -33,8 +33,7 @@ from fusiongs.atomic import write_text
 from fusiongs.camera.tum import PoseSamples, read_tum, write_tum
 from fusiongs.errors import ConfigError, FusionGSError, InputError
 from fusiongs.io.scene import Scene
-from fusiongs.pipeline.dataset import PieceTask, read_piece, run_piece
-from fusiongs.pipeline.executor import default_jobs, run_pieces
+from fusiongs.pipeline.dataset import PieceTask, raise_failed, read_piece, run_all
 
 CHUNKS_FILE = "chunks.json"
 CHUNKS_DIR = "chunks"
@@ -234,7 +233,8 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
     """Deblur a long recording chunk by chunk and stitch the results (see the module docstring).
 
     Returns ``chunks.json``'s content, with ``"metrics"`` (the stitched frames' scores) when the
-    recording has truth images.
+    recording has truth images; a recording no longer than one chunk is deblurred in one piece
+    (:func:`fusiongs.pipeline.deblur.run_deblur`, whose metrics are returned).
 
     Raises:
         ConfigError: ``chunk.seconds`` shorter than two exposures (or than the overlap plus one).
@@ -252,6 +252,11 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
     scene = load_scene(scene_path)
     check_chunks(scene, cfg.chunk.seconds, cfg.chunk.overlap)
     spans = plan_chunks(*scene_span(scene), cfg.chunk.seconds, cfg.chunk.overlap)
+    if len(spans) == 1:  # no longer than one chunk: one piece, as without chunk.seconds
+        from fusiongs.pipeline.deblur import run_deblur
+
+        return run_deblur(scene_path, out, config=config, overrides=overrides, resume=resume, log=log,
+                          calibration=calibration, holdout=holdout)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     calib_file = out / "calibration.json"
@@ -284,20 +289,10 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
                                None if config is None else str(config), tuple(overrides),
                                None if thresholds is None else str(calib_file),
                                None if holdout is None else str(holdout), resume))
-    jobs = default_jobs(len(tasks)) if jobs in (None, 0) else jobs
-    log(f"{len(spans)} chunk(s) of at most {cfg.chunk.seconds:g} s (overlap {cfg.chunk.overlap:g} s) "
-        f"over {spans[0][0]:.2f}-{spans[-1][1]:.2f} s: {len(tasks)} to run, {jobs} at a time ({executor})")
-
-    def done(row: dict) -> None:
-        what = row.get("error") or f"{row['wall_seconds'] / 60:.1f} min"
-        log(f"chunk {row['name']}: {row['status']} ({what})")
-
-    rows = run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done, address=address)
-    failed = [r for r in rows if r["status"] != "done"]
-    if failed:
-        names = "; ".join(f"chunk {r['name']}: {r.get('error', 'failed')}" for r in failed)
-        raise FusionGSError(f"{len(failed)} of {len(spans)} chunk(s) failed ({names}); the others are "
-                            f"finished in {out / CHUNKS_DIR}; run again with --resume")
+    intro = (f"{len(spans)} chunk(s) of at most {cfg.chunk.seconds:g} s (overlap {cfg.chunk.overlap:g} s) "
+             f"over {spans[0][0]:.2f}-{spans[-1][1]:.2f} s")
+    raise_failed(run_all(tasks, intro, jobs=jobs, executor=executor, address=address, log=log,
+                         label="chunk "), "chunk", out / CHUNKS_DIR)
     index = stitch(scene, spans, runs, out, cfg.output.video_fps)
     metrics = score(scene, out, thresholds)
     if metrics is not None:

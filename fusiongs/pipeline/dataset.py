@@ -122,6 +122,30 @@ def format_summary(rows: Sequence[dict]) -> str:
     return "\n".join(lines)
 
 
+def run_all(tasks: Sequence[PieceTask], intro: str, *, jobs: int | None, executor: str,
+            address: str | None, log: Callable[..., None], label: str = "") -> list[dict]:
+    """Run the pieces ``tasks`` (:func:`run_piece`), ``jobs`` at a time (None or 0: one per core),
+    logging ``intro`` with the plan first and one line per finished piece (``label`` before its
+    name); returns their rows in the order of ``tasks``."""
+    jobs = default_jobs(len(tasks)) if jobs in (None, 0) else jobs
+    log(f"{intro}: {len(tasks)} to run, {jobs} at a time ({executor})")
+
+    def done(row: dict) -> None:
+        what = row.get("error") or f"{row['wall_seconds'] / 60:.1f} min"
+        log(f"{label}{row['name']}: {row['status']} ({what})")
+
+    return run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done, address=address)
+
+
+def raise_failed(rows: Sequence[dict], what: str, out: Path) -> None:
+    """After every piece ran: one :class:`FusionGSError` line naming the failed ones, if any."""
+    failed = [r for r in rows if r["status"] != "done"]
+    if failed:
+        names = "; ".join(f"{r['name']}: {r.get('error', 'failed')}" for r in failed)
+        raise FusionGSError(f"{len(failed)} of {len(rows)} {what}(s) failed ({names}); the others are "
+                            f"finished in {out}; fix them and run again with --resume")
+
+
 def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None = None,
                 overrides: Sequence[str] = (), calibration: str | Path | None = None,
                 holdout: int | str | None = None, resume: bool = False, jobs: int | None = None,
@@ -154,21 +178,11 @@ def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None 
                                None if config is None else str(config), tuple(overrides),
                                None if calibration is None else str(calibration),
                                None if holdout is None else str(holdout), resume))
-    jobs = default_jobs(len(tasks)) if jobs in (None, 0) else jobs
-    log(f"{len(scenes)} recording(s) in {root}: {len(tasks)} to run, {jobs} at a time ({executor})")
-
-    def done(row: dict) -> None:
-        what = row.get("error") or f"{row['wall_seconds'] / 60:.1f} min"
-        log(f"{row['name']}: {row['status']} ({what})")
-
-    for row in run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done, address=address):
+    for row in run_all(tasks, f"{len(scenes)} recording(s) in {root}", jobs=jobs, executor=executor,
+                       address=address, log=log):
         rows[row["name"]] = row
     ordered = [rows[s.name] for s in scenes]
     write_text(out / SUMMARY_FILE, json.dumps({"root": str(root), "recordings": ordered}, indent=2) + "\n")
     log(format_summary(ordered))
-    failed = [r for r in ordered if r["status"] != "done"]
-    if failed:
-        names = "; ".join(f"{r['name']}: {r.get('error', 'failed')}" for r in failed)
-        raise FusionGSError(f"{len(failed)} of {len(ordered)} recording(s) failed ({names}); the others "
-                            f"are finished in {out}; fix them and run again with --resume")
+    raise_failed(ordered, "recording", out)
     return ordered

@@ -95,3 +95,10 @@ def test_a_chunked_run_stitches_every_frame_and_resumes_only_the_unfinished_chun
     assert "chunk 000: finished earlier (kept)" in printed and "chunk 002: finished earlier (kept)" in printed
     assert "1 to run" in printed and (out / "chunks" / "001" / "run" / PIECE_FILE).is_file()
     assert {k: (out / "chunks" / k / "run" / PIECE_FILE).stat().st_mtime_ns for k in ("000", "002")} == stamps
+
+
+def test_a_recording_no_longer_than_a_chunk_runs_in_one_piece(long_scene, tmp_path):
+    out = tmp_path / "out"
+    assert main(["deblur", str(long_scene), "-o", str(out), "chunk.seconds=5", *TINY]) == 0
+    assert (out / "metrics.json").is_file() and (out / "model.ply").is_file()
+    assert not (out / CHUNKS_FILE).exists() and not (out / "chunks").exists()

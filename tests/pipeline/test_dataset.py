@@ -118,3 +118,11 @@ def test_a_dataset_runs_on_a_dask_cluster_the_test_starts(tiny_scene, tmp_path):
         metrics = json.loads((out / name / "metrics.json").read_text())
         assert summary[0 if name == "one" else 1]["psnr"] == {
             m: v["psnr"] for m, v in metrics["mean"]["deblur"].items()}
+
+
+@pytest.mark.parametrize(("args", "field"), [(["--jobs", "-1"], "--jobs"),
+                                             (["--address", "tcp://127.0.0.1:9"], "--address")])
+def test_bad_worker_options_are_one_line_and_exit_2_before_any_work(args, field, tmp_path, capsys):
+    assert main(["deblur", str(tmp_path / "none"), "-o", str(tmp_path / "out"), *args]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and field in err[0]
