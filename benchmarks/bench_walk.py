@@ -41,6 +41,10 @@ from fusiongs.sim.write import write_simulated_scene  # noqa: E402
 PEAK = ("import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); "
         "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss); sys.exit(r.returncode)")
 WALKS = SceneRange(presets=("hallway", "walkway"), motion_scale=(0.8, 1.25), duration=20.0, frames=240)
+# A walk's image motion is a few pixels per exposure (hand shake of a few degrees at 1-6 Hz): event
+# renders every 2 ms (under half a pixel apart) and 24 renders per exposure resolve it, at half the
+# simulator's default cost (its defaults are sized for the fast orbits of the compact presets).
+WALK_SIM = {"dvs_rate_hz": 500.0, "blur_samples": 24}
 
 
 def walk_scene(root: Path, seed: int, split: str, size: str, duration: float, frames: int,
@@ -50,7 +54,7 @@ def walk_scene(root: Path, seed: int, split: str, size: str, duration: float, fr
     path = root / (f"{split}_{seed}_{w}x{h}_{duration:g}s_{frames}f" + ("_smoke" if smoke else ""))
     if not (path / "scene.json").is_file():
         cfg = sweep_scene_config(seed, split, scenes=WALKS)
-        cfg = dataclasses.replace(cfg, width=w, height=h, duration=duration, frames=frames)
+        cfg = dataclasses.replace(cfg, width=w, height=h, duration=duration, frames=frames, **WALK_SIM)
         if smoke:
             cfg = dataclasses.replace(cfg, **(SMOKE_SCENE | {"duration": duration, "frames": frames}))
         res = run_simulation(cfg.validate())

@@ -185,7 +185,7 @@ def depth() -> Preset:
     return Preset(World(tuple(quads), tex), motion, 62.0)
 
 
-WALK_SHAKE = {"shake_pos": 0.012, "shake_rot_deg": 0.6, "shake_hz": (1.5, 8.0)}  # a walker's sway
+WALK_SHAKE = {"shake_pos": 0.03, "shake_rot_deg": 3.0, "shake_hz": (1.0, 6.0)}  # a hand-held walker's sway
 
 
 def hallway() -> Preset:

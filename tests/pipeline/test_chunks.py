@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -12,7 +13,9 @@ from fusiongs.errors import ConfigError
 from fusiongs.io.scene_io import load_scene
 from fusiongs.pipeline.chunks import CHUNKS_FILE, check_chunks, chunk_scene, owners, plan_chunks, scene_span
 from fusiongs.pipeline.dataset import PIECE_FILE
+from fusiongs.train.checkpoint import load_checkpoint
 from tests.conftest import TINY, simulated_scene
+from tests.kill import run_killed
 
 CHUNKED = ["chunk.seconds=0.3", "chunk.overlap=0.1"]
 
@@ -102,3 +105,30 @@ def test_a_recording_no_longer_than_a_chunk_runs_in_one_piece(long_scene, tmp_pa
     assert main(["deblur", str(long_scene), "-o", str(out), "chunk.seconds=5", *TINY]) == 0
     assert (out / "metrics.json").is_file() and (out / "model.ply").is_file()
     assert not (out / CHUNKS_FILE).exists() and not (out / "chunks").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not hasattr(os, "killpg"), reason="needs POSIX process groups")
+def test_a_chunked_run_killed_mid_chunk_resumes_to_the_uninterrupted_result(long_scene, tmp_path):
+    # chunks one after another in one process (so the kill point is exact), checkpoints every 3
+    # iterations: killed just after chunk 001 wrote its first checkpoint, chunk 000 finished
+    args = [*TINY, *CHUNKED, "output.checkpoint_every=3", "--executor", "serial"]
+    reference = tmp_path / "reference"
+    assert main(["deblur", str(long_scene), "-o", str(reference), *args]) == 0
+
+    out = tmp_path / "out"
+    argv = ["deblur", str(long_scene), "-o", str(out), *args]
+    assert run_killed(argv, out, "chunks/001/run/checkpoint.pt:1:after") == "killed"
+    first = out / "chunks" / "000" / "run" / PIECE_FILE
+    assert first.is_file() and not (out / "chunks" / "001" / "run" / PIECE_FILE).exists()
+    assert load_checkpoint(out / "chunks" / "001" / "run" / "checkpoint.pt")["iteration"] == 3
+    assert not (out / "metrics.json").exists()
+    stamp = first.stat().st_mtime_ns
+
+    assert main([*argv, "--resume"]) == 0
+    assert first.stat().st_mtime_ns == stamp  # the finished chunk was kept, not redone
+    psnr = [json.loads((o / "metrics.json").read_text())["mean"]["deblur"]["fusiongs"]["psnr"]
+            for o in (out, reference)]
+    assert abs(psnr[0] - psnr[1]) <= 0.1, psnr
+    assert sorted(p.name for p in (out / "deblurred").iterdir()) == \
+        sorted(p.name for p in (reference / "deblurred").iterdir())

@@ -12,20 +12,13 @@ parses, PNGs decode with valid chunks, the checkpoint loads, ...); a half-writte
 only as a temporary of the atomic writer, and the next run clears those away. The resumed run
 ends on the same Gaussians and the same deblur PSNR as an uninterrupted run with the same seed.
 
-The points are exact, not timed: the child process runs ``fusiongs.cli.main`` behind a small hook
-(:data:`CHILD`) that, on reaching the point, writes a marker file and sleeps; the test then kills
-the whole process group with SIGKILL. A half-written file is made by cutting the atomic writer's
-finished temporary to half its size just before its rename.
+The points are exact, not timed (:mod:`tests.kill`).
 """
 
 from __future__ import annotations
 
 import json
 import os
-import signal
-import subprocess
-import sys
-import time
 from pathlib import Path
 
 import pytest
@@ -38,10 +31,10 @@ from fusiongs.frames.image_io import read_image
 from fusiongs.scene.ply import load_ply
 from fusiongs.train.checkpoint import load_checkpoint
 from fusiongs.train.settings import DeblurConfig
+from tests.kill import run_killed
 
 pytestmark = pytest.mark.skipif(not hasattr(os, "killpg"), reason="needs POSIX process groups")
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 ITERATIONS = 12
 # checkpoints at 3, 6, 9 and 12; densification refines at 4 and 8 from statistics gathered across
 # the checkpoints, splitting with its own generator; the event loss starts at 4, pose learning at 5;
@@ -50,85 +43,11 @@ ARGS = ["trajectory=linear", "init.n_points=300", "blur.n_samples=3", "events.wa
         "events.pixels=256", f"optim.iterations={ITERATIONS}", "optim.pose_start=5",
         "densify.start=2", "densify.every=4", "densify.stop=11", "output.progress=false",
         "output.checkpoint_every=3"]
-TIMEOUT_S = 120.0
-
-# argv: POINT MARKER deblur-arguments... POINT is "none", "estimate" (entering the threshold
-# estimate) or "NAME:N:after|half" (the N-th atomic write of OUT/**/NAME in this process: just
-# after its rename, or with its temporary cut to half its size instead of the rename)
-CHILD = r"""
-import os, sys, time
-from pathlib import Path
-
-point, marker, argv = sys.argv[1], sys.argv[2], sys.argv[3:]
-
-def park():
-    Path(marker).write_text(point)
-    time.sleep(600)  # until SIGKILL
-    os._exit(3)
-
-if point == "estimate":
-    import fusiongs.calibrate.estimate as calibrate
-
-    def estimate_thresholds(*args, **kwargs):
-        park()
-
-    calibrate.estimate_thresholds = estimate_thresholds
-elif point != "none":
-    name, nth, how = point.split(":")
-    real_replace, seen = os.replace, [0]
-
-    def replace(src, dst, *args, **kwargs):
-        if Path(dst).name != name:
-            return real_replace(src, dst, *args, **kwargs)
-        seen[0] += 1
-        if seen[0] != int(nth):
-            return real_replace(src, dst, *args, **kwargs)
-        if how == "after":
-            real_replace(src, dst, *args, **kwargs)
-        else:
-            with open(src, "r+b") as f:
-                f.truncate(os.path.getsize(src) // 2)
-        park()
-
-    os.replace = replace
-
-from fusiongs.cli import main
-
-sys.exit(main(argv))
-"""
-
 
 def _run(scene: Path, out: Path, point: str, *, resume: bool) -> str:
-    """Run ``fusiongs deblur`` in a subprocess; with a ``point`` other than ``"none"`` SIGKILL it
-    there. Returns how it ended (``"killed"`` or ``"finished"``); fails when it ends otherwise."""
-    marker = out.parent / f"{out.name}.parked"
-    marker.unlink(missing_ok=True)
-    log = out.parent / f"{out.name}.log"
-    cmd = [sys.executable, "-c", CHILD, point, str(marker), "deblur", str(scene), "-o", str(out),
-           *ARGS, *(["--resume"] if resume else [])]
-    env = {**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    with open(log, "w") as f:
-        proc = subprocess.Popen(cmd, cwd=REPO_ROOT, env=env, stdout=f, stderr=subprocess.STDOUT,
-                                start_new_session=True)
-    t0 = time.monotonic()
-    try:
-        while proc.poll() is None and not marker.exists():
-            if time.monotonic() - t0 > TIMEOUT_S:
-                pytest.fail(f"fusiongs deblur ({point}) still running after {TIMEOUT_S} s:\n"
-                            + log.read_text())
-            time.sleep(0.005)
-        if marker.exists():
-            os.killpg(proc.pid, signal.SIGKILL)
-            assert proc.wait() == -signal.SIGKILL
-            return "killed"
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
-    if proc.returncode != 0 or point != "none":
-        pytest.fail(f"fusiongs deblur ended with {proc.returncode} without reaching point {point!r}:\n"
-                    + log.read_text())
-    return "finished"
+    """``fusiongs deblur`` with :data:`ARGS`, killed at ``point`` (:func:`tests.kill.run_killed`)."""
+    return run_killed(["deblur", str(scene), "-o", str(out), *ARGS, *(["--resume"] if resume else [])],
+                      out, point)
 
 
 def _check_whole(path: Path) -> None:
