@@ -10,7 +10,7 @@ of the blurry input, EDI with the true thresholds and fusiongs, the worst frame'
 blurry input, the frames next to a seam against the others, minutes and peak memory. Defaults
 are chosen on ``--split tuning``; figures are reported from ``--split test`` only.
 
-    PYTHONPATH=. python benchmarks/bench_walk.py --split test --seeds 1000,1001 --chunks 0,6
+    PYTHONPATH=. python benchmarks/bench_walk.py --split test --seeds 1000,1001 --chunks 0,10
     PYTHONPATH=. python benchmarks/bench_walk.py --split tuning --seeds 0 --size 96x72 --duration 10 \\
         --frames 120 --chunks 0,4 -- optim.iterations=1000
 """
@@ -102,13 +102,13 @@ def row_of(seed: int, chunk: float, res: dict) -> dict:
 
 def format_rows(rows: list[dict]) -> str:
     head = (f"{'seed':>6}{'chunk s':>9}{'frames':>8}{'blurry':>8}{'EDI true θ':>12}{'fusiongs':>10}"
-            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'minutes':>9}{'peak GB':>9}")
+            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'minutes':>9}{'peak GB':>9}  overrides")
     lines = [head]
     for r in rows:
         lines.append(f"{r['seed']:>6}{r['chunk']:>9g}{r['frames']:>8}{r['blurry']:>8.2f}"
                      f"{r['edi_true']:>12.2f}{r['fusiongs']:>10.2f}{r['fusiongs'] - r['edi_true']:>+8.2f}"
                      f"{r['worst_vs_blurry']:>+17.2f}{r['seam_vs_others']:>+15.2f}{r['minutes']:>9.1f}"
-                     f"{r['peak_gb']:>9.2f}")
+                     f"{r['peak_gb']:>9.2f}  {r.get('tag') or '-'}")
     return "\n".join(lines)
 
 
@@ -119,9 +119,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--size", default="173x130")
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--frames", type=int, default=240)
-    ap.add_argument("--chunks", default="0,6", help="chunk.seconds values to compare (0: one piece)")
+    ap.add_argument("--chunks", default="0,10", help="chunk.seconds values to compare (0: one piece)")
     ap.add_argument("--jobs", type=int, default=0, help="--jobs of each run (0: one per core)")
     ap.add_argument("--root", default="bench_out/walk")
+    ap.add_argument("--tag", default="", help="names this set of overrides in the run folders and rows")
     ap.add_argument("--json", default=None, help="write the rows here")
     ap.add_argument("--smoke", action="store_true", help="tiny scenes (CI's smoke run)")
     ap.add_argument("overrides", nargs="*", help="config overrides for every run (after --)")
@@ -132,8 +133,9 @@ def main(argv: list[str] | None = None) -> int:
         scene = walk_scene(root / "scenes", seed, args.split, args.size, args.duration, args.frames,
                            args.smoke)
         for chunk in (float(c) for c in args.chunks.split(",")):
-            out = root / "runs" / f"{scene.name}_chunk{chunk:g}"
-            rows.append(row_of(seed, chunk, run_variant(scene, out, chunk, args.jobs, args.overrides)))
+            out = root / "runs" / f"{scene.name}_chunk{chunk:g}{'_' + args.tag if args.tag else ''}"
+            rows.append(row_of(seed, chunk, run_variant(scene, out, chunk, args.jobs, args.overrides))
+                        | {"tag": args.tag})
             print(json.dumps(rows[-1]), flush=True)
     print(format_rows(rows))
     if args.json:

@@ -56,14 +56,14 @@ def run(args: argparse.Namespace) -> int:
                          args.address)
     from pathlib import Path
 
-    from fusiongs.pipeline.dataset import run_dataset
+    from fusiongs.pipeline.dataset import longer_than_a_chunk, run_dataset
 
     if Path(args.scene).is_dir() and not (Path(args.scene) / "scene.json").exists():  # a dataset
         run_dataset(args.scene, args.out, config=args.config, overrides=args.overrides,
                     calibration=args.calibration, holdout=args.holdout, resume=args.resume,
                     jobs=args.jobs, executor=args.executor, address=args.address)
         return 0
-    if resolve_config(args.config, args.overrides).chunk.seconds > 0:  # in time chunks when longer
+    if longer_than_a_chunk(args.scene, args.config, args.overrides):  # in time chunks
         from fusiongs.pipeline.chunks import run_chunked
 
         run_chunked(args.scene, args.out, config=args.config, overrides=args.overrides,

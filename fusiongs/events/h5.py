@@ -139,6 +139,26 @@ def read_events_h5(path: str | Path, width: int | None = None, height: int | Non
                             drop_invalid)
 
 
+def time_range_h5(path: str | Path) -> tuple[int, int]:
+    """First and last timestamp (µs, ``t_offset`` included) of an ``events.h5``, from its first and
+    last entries alone (nothing else is read: cheap for any size; the stream is assumed sorted,
+    as :func:`read_events_h5` checks on a full read).
+
+    Raises:
+        InputError: no ``events/t`` dataset, or zero events.
+    """
+    import h5py
+
+    with open_h5(path) as f:
+        t = f.get("events/t")
+        if not isinstance(t, h5py.Dataset):
+            raise InputError(path, "events/t", "an HDF5 dataset of timestamps", "missing")
+        require_events(int(t.shape[0]) if t.shape else 0, path)
+        first, last = t[0], t[-1]
+        offset = _t_offset(f, f["events"], path)
+    return int(first) + offset, int(last) + offset
+
+
 def _t_offset(f, g, path) -> int:
     if "t_offset_us" in g.attrs:
         v = np.asarray(g.attrs["t_offset_us"])

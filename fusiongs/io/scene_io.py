@@ -136,6 +136,29 @@ def _load_frames(spec: SceneSpec, root: Path, where: str) -> FrameSet:
                     spec.frame_response)
 
 
+def recording_span(path: str | Path) -> tuple[float, float]:
+    """First and last instant (s) of a scene folder's recording, its events and its exposures, from
+    ``scene.json`` and the event file's first and last timestamps alone (no image and no event
+    array is loaded): what decides whether ``fusiongs deblur`` cuts it into time chunks.
+
+    Raises:
+        InputError: a bad ``scene.json``, a missing events file, or one with no events.
+    """
+    from fusiongs.events.h5 import time_range_h5
+
+    jp = scene_json_path(path)
+    spec = read_scene_spec(jp)
+    ends = [v for f in spec.frames for v in (f.t_start, f.t_end)]
+    if spec.events_path is not None:
+        ep = _resolve(jp.parent, spec.events_path)
+        if not ep.is_file():
+            raise InputError(jp, "events.path", "an existing HDF5 event file", str(ep))
+        ends += [v * 1e-6 for v in time_range_h5(ep)]
+    if not ends:
+        raise InputError(jp, "frames", "frames or events", "neither")
+    return min(ends), max(ends)
+
+
 def load_scene(path: str | Path, *, sort_events: bool = False, drop_invalid_events: bool = False,
                load_events: bool = True) -> Scene:
     """Load a scene folder.

@@ -2,7 +2,8 @@
 
 A dataset is a folder without ``scene.json`` whose subfolders are scene folders (each with its own
 ``scene.json``). Each recording is one piece (:mod:`fusiongs.pipeline.executor`): deblurred into
-``OUT/<name>/`` exactly as ``fusiongs deblur <name> -o OUT/<name>`` would, its log in
+``OUT/<name>/`` exactly as ``fusiongs deblur <name> -o OUT/<name>`` would (a recording longer than
+``chunk.seconds`` in time chunks, :mod:`fusiongs.pipeline.chunks`, one after another), its log in
 ``OUT/<name>/log.txt`` and, once it has finished, its summary row in ``OUT/<name>/piece.json``
 (written last, atomically). A piece that fails leaves a row saying why and the others go on; the
 summary of all of them is ``OUT/summary.json``. With ``--resume`` the pieces whose ``piece.json``
@@ -54,6 +55,8 @@ class PieceTask:
     calibration: str | None
     holdout: str | None
     resume: bool
+    whole: bool = False              # a whole recording (of a dataset): cut into time chunks, one after
+                                     # another in this piece's process, when it outlasts chunk.seconds
 
 
 def read_piece(out: str | Path) -> dict | None:
@@ -76,6 +79,20 @@ def summary_row(name: str, metrics: dict, wall_seconds: float) -> dict:
             "heldout_psnr": {m: v["psnr"] for m, v in held.items()}}
 
 
+def longer_than_a_chunk(scene: str | Path, config: str | Path | None, overrides: Sequence[str]) -> bool:
+    """Whether the recording ``scene`` outlasts ``chunk.seconds`` of its config (read from
+    ``scene.json`` and the event file's ends alone); one that does not is deblurred in one piece,
+    as with ``chunk.seconds=0``."""
+    from fusiongs.io.scene_io import recording_span
+    from fusiongs.pipeline.deblur import resolve_config
+
+    seconds = resolve_config(config, overrides).chunk.seconds
+    if seconds <= 0:
+        return False
+    t0, t1 = recording_span(scene)
+    return t1 - t0 > seconds
+
+
 def run_piece(task: PieceTask) -> dict:
     """Deblur one recording into ``task.out``; returns its summary row, ``status`` "done" or
     "failed" (with ``error``: the one line ``fusiongs deblur`` would have printed)."""
@@ -89,9 +106,16 @@ def run_piece(task: PieceTask) -> dict:
             print(*parts, file=log_file, flush=True)
 
         try:
-            metrics = run_deblur(task.scene, out, config=task.config, overrides=task.overrides,
-                                 resume=task.resume, log=log, calibration=task.calibration,
-                                 holdout=task.holdout)
+            if task.whole and longer_than_a_chunk(task.scene, task.config, task.overrides):
+                from fusiongs.pipeline.chunks import run_chunked
+
+                metrics = run_chunked(task.scene, out, config=task.config, overrides=task.overrides,
+                                      resume=task.resume, log=log, calibration=task.calibration,
+                                      holdout=task.holdout, jobs=1, executor="serial").get("metrics", {})
+            else:
+                metrics = run_deblur(task.scene, out, config=task.config, overrides=task.overrides,
+                                     resume=task.resume, log=log, calibration=task.calibration,
+                                     holdout=task.holdout)
         except Exception as e:  # noqa: BLE001 (a piece reports its failure; the others go on)
             if not isinstance(e, FusionGSError):
                 log(traceback.format_exc())
@@ -177,7 +201,7 @@ def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None 
         tasks.append(PieceTask(scene.name, str(scene), str(out / scene.name),
                                None if config is None else str(config), tuple(overrides),
                                None if calibration is None else str(calibration),
-                               None if holdout is None else str(holdout), resume))
+                               None if holdout is None else str(holdout), resume, whole=True))
     for row in run_all(tasks, f"{len(scenes)} recording(s) in {root}", jobs=jobs, executor=executor,
                        address=address, log=log):
         rows[row["name"]] = row

@@ -266,7 +266,7 @@ class OutputSettings:
 
 @dataclass
 class ChunkSettings:
-    seconds: float = 0.0             # a recording longer than this is deblurred in overlapping time
+    seconds: float = 10.0            # a recording longer than this is deblurred in overlapping time
                                      # chunks, each with its own Gaussians and path (pipeline/chunks.py);
                                      # 0 = one piece whatever the length
     overlap: float = 1.0             # seconds shared by neighbouring chunks (a frame is taken from the

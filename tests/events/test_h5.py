@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fusiongs.errors import InputError
-from fusiongs.events.h5 import read_events_h5, write_events_h5
+from fusiongs.events.h5 import read_events_h5, time_range_h5, write_events_h5
 from fusiongs.events.stream import EventStream
 
 
@@ -75,6 +75,20 @@ def test_dsec_style_t_offset_dataset_and_ms_to_idx_are_accepted(tmp_path):
                p=np.array([1, 0], np.uint8),
                root={"t_offset": np.int64(7), "ms_to_idx": np.array([0, 2], np.uint64)})
     assert read_events_h5(tmp_path / "e.h5", 2, 1).t.tolist() == [7, 12]
+
+
+def test_the_time_range_is_the_full_reads_first_and_last_with_either_offset(tmp_path):
+    _write_raw(tmp_path / "a.h5", t=np.array([0, 5, 9], np.int64), x=[0, 1, 0], y=[0, 0, 0],
+               p=np.array([1, 0, 1], np.uint8), attrs={"t_offset_us": np.int64(1000)})
+    _write_raw(tmp_path / "b.h5", t=np.array([0, 5], np.uint32), x=[0, 1], y=[0, 0],
+               p=np.array([1, 0], np.uint8), root={"t_offset": np.int64(7)})
+    for name in ("a.h5", "b.h5"):
+        t = read_events_h5(tmp_path / name, 2, 1).t
+        assert time_range_h5(tmp_path / name) == (t[0], t[-1])
+    _write_raw(tmp_path / "e.h5", t=np.zeros(0, np.int64), x=np.zeros(0, np.uint16),
+               y=np.zeros(0, np.uint16), p=np.zeros(0, np.int8))
+    with pytest.raises(InputError, match="events: expected at least one event"):
+        time_range_h5(tmp_path / "e.h5")
 
 
 def test_missing_dataset_is_named(tmp_path):

@@ -10,7 +10,7 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import ConfigError
-from fusiongs.io.scene_io import load_scene
+from fusiongs.io.scene_io import load_scene, recording_span
 from fusiongs.pipeline.chunks import CHUNKS_FILE, check_chunks, chunk_scene, owners, plan_chunks, scene_span
 from fusiongs.pipeline.dataset import PIECE_FILE
 from fusiongs.train.checkpoint import load_checkpoint
@@ -98,6 +98,24 @@ def test_a_chunked_run_stitches_every_frame_and_resumes_only_the_unfinished_chun
     assert "chunk 000: finished earlier (kept)" in printed and "chunk 002: finished earlier (kept)" in printed
     assert "1 to run" in printed and (out / "chunks" / "001" / "run" / PIECE_FILE).is_file()
     assert {k: (out / "chunks" / k / "run" / PIECE_FILE).stat().st_mtime_ns for k in ("000", "002")} == stamps
+
+
+def test_the_span_that_decides_chunking_is_read_without_loading_the_recording(long_scene):
+    assert recording_span(long_scene) == pytest.approx(scene_span(load_scene(long_scene)), abs=1e-6)
+
+
+@pytest.mark.slow
+def test_a_long_recording_of_a_dataset_is_cut_into_chunks(long_scene, tmp_path):
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "walk").symlink_to(long_scene, target_is_directory=True)
+    out = tmp_path / "out"
+    assert main(["deblur", str(data), "-o", str(out), "--executor", "serial", *TINY, *CHUNKED]) == 0
+    index = json.loads((out / "walk" / CHUNKS_FILE).read_text())
+    assert len(index["chunks"]) == 3 and (out / "walk" / "deblurred.mp4").is_file()
+    row = json.loads((out / "summary.json").read_text())["recordings"][0]
+    stitched = json.loads((out / "walk" / "metrics.json").read_text())["mean"]["deblur"]
+    assert row["status"] == "done" and row["psnr"]["fusiongs"] == stitched["fusiongs"]["psnr"]
 
 
 def test_a_recording_no_longer_than_a_chunk_runs_in_one_piece(long_scene, tmp_path):
