@@ -49,6 +49,12 @@ def _resolve(root: Path, rel: str) -> Path:
     return p if p.is_absolute() else root / p
 
 
+def frame_names(spec: SceneSpec) -> tuple[str, ...]:
+    """The names a scene's frames go by (``FrameSet.names``, the stems of the deblurred images):
+    their files' stems, or ``<index>_<stem>`` for all when two stems are equal."""
+    return _frame_names(spec.frames)
+
+
 def _frame_names(entries: tuple[FrameEntry, ...]) -> tuple[str, ...]:
     stems = [Path(f.path).stem for f in entries]
     if len(set(stems)) == len(stems):
