@@ -3,12 +3,13 @@ placed in time, and the images shown for a frame or an instant.
 
 The frames come from ``OUT/frames.json`` (written by ``fusiongs deblur``). A run written before that
 file existed is placed from the scene's own ``scene.json`` when ``--scene`` names it (the frames'
-exposure windows, the same names as ``OUT/deblurred/``); without it the viewer shows the Gaussians
-and the path, and says what is missing.
+exposure windows, the same names as ``OUT/deblurred/``; the held-out ones from ``OUT/heldout.json``);
+without it the viewer shows the Gaussians and the path, and says what is missing.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,7 @@ from fusiongs.outputs.write import FRAMES_FILE, PLY_FILE
 
 CHECKPOINT_FILE = "checkpoint.pt"
 CHUNKS_FILE = "chunks.json"
+HELDOUT_FILE = "heldout.json"  # written with --holdout: the held-out frames' scores
 FINISHED = "a finished `fusiongs deblur` run folder (with checkpoint.pt and model.ply)"
 
 
@@ -140,6 +142,17 @@ def deblurred_names(run: Path) -> list[str]:
     return sorted(p.stem for p in (run / "deblurred").glob("*.png"))
 
 
+def held_out_names(run: Path) -> set[str]:
+    """The frames a run held out (``--holdout``): the keys of ``frames`` in ``run/heldout.json``;
+    none without the file (or when it is not that JSON)."""
+    try:
+        doc = json.loads((run / HELDOUT_FILE).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return set()
+    frames = doc.get("frames") if isinstance(doc, dict) else None
+    return set(frames) if isinstance(frames, dict) else set()
+
+
 def run_frames(run: Path, scene: Path | None = None) -> RunFrames:
     """Where the frames of the finished run ``run`` lie (see the module docstring).
 
@@ -166,6 +179,8 @@ def run_frames(run: Path, scene: Path | None = None) -> RunFrames:
             scene_frames(scene)  # a bad --scene is said now, not on the first click
     elif scene is not None:
         frames, renders = scene_frames(scene)
+        held = held_out_names(run)
+        frames = tuple(dataclasses.replace(f, trained=f.name not in held) for f in frames)
         names = [f.name for f in frames]
         if written and sorted(names) != written:
             raise InputError(scene, "frames", f"the frames of the run {run} (deblurred/: "

@@ -93,6 +93,9 @@ def test_a_run_older_than_frames_json_is_placed_from_its_scene_or_says_what_is_m
     assert [f.name for f in rf.frames] == ["a", "b"]
     assert [f.t_mid for f in rf.frames] == pytest.approx([0.01, 0.11])
     assert rf.scene == scene and "no frames.json" in rf.notes[0]
+    assert all(f.trained for f in rf.frames)
+    (old / "heldout.json").write_text(json.dumps({"holdout": 2, "frames": {"b": {"fusiongs": 30.0}}}))
+    assert [f.trained for f in run_frames(old, scene).frames] == [True, False]
     bare = run_frames(old)
     assert bare.frames == () and "--scene" in bare.notes[0] and "2 frames" in bare.notes[0]
     with pytest.raises(InputError, match="frames"):
