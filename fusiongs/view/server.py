@@ -9,11 +9,11 @@ browser window of the camera's aspect shows what the frame shows.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import socket
 import threading
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -23,7 +23,8 @@ from fusiongs.view.run import LoadedRun, ViewFrame, blurry_image, run_image, sid
 
 PATH_SAMPLES = 400  # points of the drawn path
 SLIDER_STEPS = 1000  # positions of the time slider over the path
-FRUSTUM_SHARE = 0.08  # a frustum's depth, as a share of the opening view's median scene depth
+FRUSTUM_SHARE = 0.08  # a frustum's depth, as a share of the opening view's median scene depth ...
+FRUSTUM_SPACING = 0.3  # ... and at most this share of the distance between consecutive frames
 PANEL_WIDTH = 320  # px: the panel's images are enlarged to about this width
 LINES = {"thickness": 1.5, "thickness_units": "screen"}  # frustum lines, px (they frame the view)
 TRAINED_COLOUR = (40, 110, 230)
@@ -76,6 +77,16 @@ def enlarged(img: np.ndarray | None, width: int = PANEL_WIDTH) -> np.ndarray | N
     return np.ascontiguousarray(np.repeat(np.repeat(img, k, axis=0), k, axis=1)) if k > 1 else img
 
 
+def frustum_scale(c2w: np.ndarray, depth: float) -> float:
+    """The depth (scene units) of the frames' frustums: :data:`FRUSTUM_SHARE` of the scene depth,
+    at most :data:`FRUSTUM_SPACING` of the median distance between consecutive frames' centres
+    (``c2w`` ``[F, 4, 4]``), so that the neighbours of the camera the page opens at stay small."""
+    steps = np.linalg.norm(np.diff(np.asarray(c2w)[:, :3, 3], axis=0), axis=1)
+    steps = steps[steps > 0]
+    scale = FRUSTUM_SHARE * depth
+    return min(scale, FRUSTUM_SPACING * float(np.median(steps))) if steps.size else scale
+
+
 def frame_view(run: LoadedRun, frame: ViewFrame) -> tuple[str, np.ndarray | None]:
     """The caption and the image (uint8 blurry | deblurred, or None) of one frame of ``run``."""
     blurry, missing = None, ""
@@ -92,7 +103,7 @@ def frame_view(run: LoadedRun, frame: ViewFrame) -> tuple[str, np.ndarray | None
     return caption, side_by_side(blurry, deblurred)
 
 
-@dataclass
+@dataclasses.dataclass
 class RunViewer:
     """The served page of a run and its live elements (what the callbacks change).
 
@@ -104,6 +115,7 @@ class RunViewer:
         slider, follow, sharp, sharp_label, frame_image, frame_label: the panel's time slider,
             "camera follows the path" checkbox, sharp render and its caption, frame image and its
             caption (viser GUI handles).
+        frustums: the cameras' frustums (viser scene handles).
     """
 
     server: object
@@ -116,6 +128,7 @@ class RunViewer:
     sharp_label: object = None
     frame_image: object = None
     frame_label: object = None
+    frustums: list = dataclasses.field(default_factory=list)
 
     def stop(self) -> None:
         """Stop serving (quietly: the command says what it does)."""
@@ -171,15 +184,17 @@ def _scene(v: RunViewer) -> None:
     path = run.c2w(np.linspace(*run.t_range, PATH_SAMPLES))[:, :3, 3]
     server.scene.add_spline_catmull_rom("/path", points=path, color=TRAINED_COLOUR, thickness=2.0,
                                         thickness_units="screen")
-    aspect, fov, scale = cam.width / cam.height, fov_y(cam), FRUSTUM_SHARE * v.depth
     frames = run.frames.frames
     mids = [f.t_mid for f in frames]
-    for frame, c2w in zip(frames, run.c2w(mids) if mids else []):
+    poses = run.c2w(mids) if mids else np.zeros((0, 4, 4))
+    aspect, fov, scale = cam.width / cam.height, fov_y(cam), frustum_scale(poses, v.depth)
+    for frame, c2w in zip(frames, poses):
         p = view_pose(c2w, v.depth)
         handle = server.scene.add_camera_frustum(
             f"/frames/{frame.name}", fov=fov, aspect=aspect, scale=scale, wxyz=p.wxyz, position=p.position,
             color=TRAINED_COLOUR if frame.trained else HELD_OUT_COLOUR, **LINES)
         handle.on_click(lambda _, f=frame: v.show_frame(f))
+        v.frustums.append(handle)
     renders = [(n, t) for n, t in run.frames.renders if not np.any(np.isclose(t, mids, rtol=0, atol=1e-6))]
     for (name, t), c2w in zip(renders, run.c2w([t for _, t in renders]) if renders else []):
         p = view_pose(c2w, v.depth)
@@ -187,6 +202,7 @@ def _scene(v: RunViewer) -> None:
             f"/renders/{name}", fov=fov, aspect=aspect, scale=0.6 * scale, wxyz=p.wxyz, position=p.position,
             color=RENDER_COLOUR, **LINES)
         handle.on_click(lambda _, n=name, tt=t: v.show_render(n, tt))
+        v.frustums.append(handle)
 
 
 def _panel(v: RunViewer) -> None:
@@ -200,6 +216,8 @@ def _panel(v: RunViewer) -> None:
     v.slider = gui.add_slider("time (s)", min=t_min, max=max(t_max, t_min + step), step=step,
                               initial_value=run.t_open)
     v.follow = gui.add_checkbox("camera follows the path", initial_value=True)
+    cameras = gui.add_checkbox("show the cameras", initial_value=True)
+    cameras.on_update(lambda _: [setattr(h, "visible", cameras.value) for h in v.frustums])
     v.sharp_label = gui.add_markdown(f"fusiongs render at t = {run.t_open:.4f} s")
     v.sharp = gui.add_image(enlarged(run.sharp_view(run.t_open)), format="png")
     v.frame_label = gui.add_markdown("")

@@ -13,7 +13,7 @@ from fusiongs.cli import main
 from fusiongs.errors import InputError
 from fusiongs.frames.image_io import write_png
 from fusiongs.view.run import check_run_folder, run_frames, side_by_side, to_uint8
-from fusiongs.view.server import Latest, check_port, enlarged
+from fusiongs.view.server import FRUSTUM_SHARE, FRUSTUM_SPACING, Latest, check_port, enlarged, frustum_scale
 
 
 def _scene(root, names=("a", "b"), response="srgb"):
@@ -141,3 +141,11 @@ def test_latest_drops_the_requests_queued_behind_a_running_call():
     for t in [first, *waiting]:
         t.join(5)
     assert seen == [1, 4]
+
+
+def test_frustums_stay_smaller_than_the_steps_between_frames():
+    c2w = np.tile(np.eye(4), (4, 1, 1))
+    c2w[:, 0, 3] = [0.0, 0.1, 0.2, 0.3]  # 0.1 apart
+    assert frustum_scale(c2w, depth=100.0) == pytest.approx(FRUSTUM_SPACING * 0.1)
+    assert frustum_scale(c2w, depth=0.01) == pytest.approx(FRUSTUM_SHARE * 0.01)
+    assert frustum_scale(c2w[:1], depth=2.0) == pytest.approx(FRUSTUM_SHARE * 2.0)  # one frame

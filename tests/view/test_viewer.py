@@ -61,6 +61,7 @@ def test_the_slider_shows_what_fusiongs_render_writes_at_that_instant(viewer, ru
 def test_a_clicked_frame_shows_blurry_beside_deblurred_and_moves_the_slider(viewer, run):
     frames = viewer.run.frames
     assert len(frames.frames) == 2 and frames.scene is not None and not frames.notes
+    assert len(viewer.frustums) == 3  # the two frames and the render instant between them
     second = frames.frames[1]
     viewer.show_frame(second)
     scene = json.loads((frames.scene / "scene.json").read_text())
