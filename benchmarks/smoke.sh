@@ -96,6 +96,8 @@ check bench_verbs_memory.py --refuse '\| NO \|' -- "$PY" $B/bench_verbs_memory.p
 check cups_strip.py -- "$PY" $B/cups_strip.py "$T/scene" "$T/gpu/run" "$T/cups_strip.jpg" \
   --frames 000000,000002
 check novel_strip.py -- "$PY" $B/novel_strip.py "$T/gpu/run" "$T/novel_strip.jpg"
+check bench_display_ply.py -- "$PY" $B/bench_display_ply.py "$T/gpu/run" --steps 5 -o "$T/display.ply" \
+  --json "$T/display.json"
 check bench_gpu.sh --note "bash -n syntax check only: needs a CUDA GPU and wheels" -- bash -n $B/bench_gpu.sh
 check bench_gpu_check.sh --note "bash -n syntax check only: needs a CUDA GPU and wheels" -- \
   bash -n $B/bench_gpu_check.sh

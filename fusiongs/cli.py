@@ -15,7 +15,7 @@ from fusiongs import __version__
 from fusiongs.errors import FusionGSError
 
 VERBS: tuple[str, ...] = ("demo", "simulate", "convert", "inspect", "calibrate", "edi", "deblur", "render",
-                         "eval")
+                         "view", "eval")
 
 
 def build_parser() -> argparse.ArgumentParser:

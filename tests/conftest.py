@@ -86,3 +86,22 @@ def tiny_run(tiny_scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
     assert main(["deblur", str(tiny_scene), "-o", str(out), *TINY]) == 0
     return out
+
+
+# 200 iterations on a 64x48 scene: a small but real fit (its renders ~28 dB from the truth), ~15 s.
+SMALL = ["init.n_points=1500", "blur.n_samples=3", "events.warmup=60", "events.pixels=256",
+         "optim.iterations=200", "optim.pose_start=100", "densify.start=50", "densify.every=50",
+         "densify.stop=150", "output.progress=false", "output.checkpoint_every=0"]
+_SMALL_RUNS: dict[str, Path] = {}
+
+
+def small_run(tmp_path_factory) -> Path:
+    """``fusiongs deblur`` with :data:`SMALL` on a 64x48 boxes scene (2 frames): the output folder
+    (its ``frames.json`` names the scene folder). Made once per test process and shared by the
+    modules that ask for it (build module-scoped fixtures on it; never write into it)."""
+    if "run" not in _SMALL_RUNS:
+        scene = simulated_scene(tmp_path_factory.mktemp("small_scene"), width=64, height=48)
+        out = tmp_path_factory.mktemp("small_run")
+        assert main(["deblur", str(scene), "-o", str(out), *SMALL]) == 0
+        _SMALL_RUNS["run"] = out
+    return _SMALL_RUNS["run"]

@@ -49,6 +49,12 @@ def _resolve(root: Path, rel: str) -> Path:
     return p if p.is_absolute() else root / p
 
 
+def frame_names(spec: SceneSpec) -> tuple[str, ...]:
+    """The names a scene's frames go by (``FrameSet.names``, the stems of the deblurred images):
+    their files' stems, or ``<index>_<stem>`` for all when two stems are equal."""
+    return _frame_names(spec.frames)
+
+
 def _frame_names(entries: tuple[FrameEntry, ...]) -> tuple[str, ...]:
     stems = [Path(f.path).stem for f in entries]
     if len(set(stems)) == len(stems):
@@ -115,19 +121,37 @@ def check_events_meet_frames(t_first_us: int, t_last_us: int, spec: SceneSpec,
                          f"[{f0:.6f}, {f1:.6f}] s")
 
 
+def _read_frame(spec: SceneSpec, root: Path, where: str, i: int) -> tuple[Path, np.ndarray]:
+    p = _frame_path(spec, root, where, i)
+    if is_raw_path(p):
+        # Raw frames are linear; they are stored encoded like the other frames.
+        lin = np.clip(read_raw(p, demosaic="opencv-ea"), 0.0, 1.0)
+        return p, np.asarray(linear_to_response(lin, spec.frame_response), dtype=np.float32)
+    return p, read_image(p)
+
+
+def read_frame(path: str | Path, i: int) -> np.ndarray:
+    """Frame ``i`` of the scene folder ``path`` (or its ``scene.json``) alone, without the others or
+    the events: ``[H, W, C]`` float32 in [0, 1] as stored (encoded by the scene's
+    ``frame_response``).
+
+    Raises:
+        InputError: a bad ``scene.json``, an index out of range, or a missing or unreadable file.
+    """
+    jp = scene_json_path(path)
+    spec = read_scene_spec(jp)
+    if not 0 <= i < len(spec.frames):
+        raise InputError(jp, "frames", f"a frame index in [0, {len(spec.frames)})", i)
+    return _read_frame(spec, jp.parent, str(jp), i)[1]
+
+
 def _load_frames(spec: SceneSpec, root: Path, where: str) -> FrameSet:
     cam = spec.camera
     if not spec.frames:
         return FrameSet.empty(cam.height, cam.width, 3, spec.frame_response)
     images = []
     for i in range(len(spec.frames)):
-        p = _frame_path(spec, root, where, i)
-        if is_raw_path(p):
-            # Raw frames are linear; they are stored encoded like the other frames.
-            lin = np.clip(read_raw(p, demosaic="opencv-ea"), 0.0, 1.0)
-            img = np.asarray(linear_to_response(lin, spec.frame_response), dtype=np.float32)
-        else:
-            img = read_image(p)
+        p, img = _read_frame(spec, root, where, i)
         _check_frame_shape(spec, where, i, p, img.shape[1], img.shape[0], img.shape[2],
                            images[0].shape[2] if images else None)
         images.append(img)

@@ -16,6 +16,7 @@ from fusiongs.configs.load import save_config
 from fusiongs.frames.image_io import write_png
 from fusiongs.frames.response import response_to_linear
 from fusiongs.io.scene import Scene
+from fusiongs.outputs.display_ply import DisplayFit, DisplayFitOptions, fit_run_display
 from fusiongs.scene.ply import save_ply
 from fusiongs.train.render_io import (
     EXPOSURE_LEVEL,
@@ -29,6 +30,8 @@ from fusiongs.train.render_io import (
 from fusiongs.train.state import FusionState
 from fusiongs.train.trained import Trained
 
+PLY_FILE = "model.ply"  # the Gaussians for 3DGS viewers: the display copy (display_ply.py)
+FRAMES_FILE = "frames.json"  # the frames' names and exposure windows, the render instants, the scene
 TRAJECTORY_FILE = "trajectory.txt"  # the refined camera path (the pose stage's own is trajectory_initial.txt)
 TRAJECTORY_RATE_HZ = 200.0  # the written path is at least this dense
 EXPOSURE_FILE = "exposure.json"  # the gain of an event-only run's renders (fusiongs render reuses it)
@@ -145,9 +148,9 @@ def read_exposure(run: Path) -> float:
 def write_outputs(tr: Trained, scene: Scene, out: Path,
                   adjust: Callable[[np.ndarray], np.ndarray] | None = None,
                   kept: np.ndarray | None = None, colour: tuple[np.ndarray, np.ndarray] | None = None
-                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """Write renders, deblurred frames and video, model, config, thresholds and the refined
-    camera path (``trajectory.txt``).
+                  ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, np.ndarray], DisplayFit]:
+    """Write renders, deblurred frames and video, model, config, thresholds, the refined
+    camera path (``trajectory.txt``) and the frames' instants (``frames.json``).
 
     Without frames (and ``output.exposure`` auto) the renders get one linear gain
     (:func:`fusiongs.train.render_io.exposure_gain`, written to ``exposure.json``) before they are
@@ -155,7 +158,8 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     ``output.exposure_ratio`` on, they and every requested render inside a frame's exposure (with
     ``output.ratio_between``, also between two exposures) are exposure-ratio corrected
     (:mod:`fusiongs.outputs.exposure_ratio`): the ratio is taken on the renders with ``colour``
-    applied, so ``adjust`` is not applied to them again.
+    applied, so ``adjust`` is not applied to them again. ``model.ply`` is the display copy of the
+    Gaussians (:func:`write_model_ply`).
 
     Args:
         adjust: applied to every sRGB image ``[H, W, 3]`` before it is written (the colour anchor,
@@ -165,9 +169,10 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
             corrected images.
 
     Returns:
-        ``(rendered, written, render_only)``: ``{name: sRGB image}`` for every ``renders`` entry
+        ``(rendered, written, render_only, ply)``: ``{name: sRGB image}`` for every ``renders`` entry
         and ``deblur/<stem>`` frame as rendered and as written (the same dict without ``adjust``
-        or correction), and the images the correction replaced as rendered, ``adjust`` applied.
+        or correction), the images the correction replaced as rendered, ``adjust`` applied, and
+        the display fit of ``model.ply``.
     """
     from fusiongs.outputs.exposure_ratio import corrected_renders, frame_log_gains
     from fusiongs.outputs.video import write_mp4
@@ -176,6 +181,7 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
     keys = [r.name for r in scene.renders] + [f"deblur/{name}" for name in scene.frames.names]
     times = np.concatenate([np.asarray([r.t for r in scene.renders], np.float64), scene.frames.mid_times()])
     corrected: dict[str, np.ndarray] = {}
+    gain = 1.0
     (out / EXPOSURE_FILE).unlink(missing_ok=True)  # an earlier event-only run's, in this folder
     if cfg.output.exposure_ratio and len(scene.frames):
         gains = frame_log_gains(state, len(scene.frames), kept)
@@ -204,8 +210,46 @@ def write_outputs(tr: Trained, scene: Scene, out: Path,
             write_png(out / "renders" / f"{key}.png", img)
     if deblurred:
         write_mp4(out / "deblurred.mp4", deblurred, cfg.output.video_fps)
-    save_ply(state.model, out / "model.ply")
+    ply = write_model_ply(state, scene.camera, times, out / PLY_FILE, gain, adjust, cfg.backend,
+                          cfg.output.ply_fit_steps)
     save_config(cfg, out / "config.yaml")
     write_thresholds(state, out / "thresholds.json")
     write_trajectory(tr, scene, out / TRAJECTORY_FILE)
-    return rendered, written, render_only
+    write_frames(scene, out / FRAMES_FILE, kept)
+    return rendered, written, render_only, ply
+
+
+def write_model_ply(state: FusionState, camera, times, path: Path, gain: float = 1.0,
+                    adjust: Callable[[np.ndarray], np.ndarray] | None = None, backend: str = "auto",
+                    steps: int = DisplayFitOptions.steps) -> DisplayFit:
+    """``model.ply``: the run's Gaussians with colours and opacities fitted for display-space
+    compositing (:func:`fusiongs.outputs.display_ply.fit_run_display`, ``steps`` Adam steps) against
+    its renders at ``times`` (s) with ``gain`` and ``adjust`` (as the written images have them).
+    The linear model of ``checkpoint.pt`` is not changed.
+
+    Returns:
+        the fit, with the PSNR of the file composited as viewers do, before and after.
+    """
+    fit = fit_run_display(state, camera, times, gain, adjust, backend, DisplayFitOptions(steps=steps))
+    save_ply(fit.model, path, colours="display",
+             comment=f"colours and opacities for display-space compositing ({fit.steps} fit steps): "
+                     f"{fit.psnr_after:.2f} dB from the run's renders "
+                     f"({fit.psnr_before:.2f} dB per-Gaussian sRGB)")
+    return fit
+
+
+def write_frames(scene: Scene, path: Path, kept: np.ndarray | None = None) -> dict:
+    """``frames.json``: the scene folder, each frame's name and exposure window (s), whether the run
+    was trained on it, and the render instants; what ``fusiongs view`` places its cameras with."""
+    f = scene.frames
+    trained = np.ones(len(f), bool)
+    if kept is not None:
+        trained[:] = False
+        trained[np.asarray(kept, dtype=np.int64)] = True
+    doc = {"scene": str(Path(scene.root).resolve()) if scene.root else None,
+           "frames": [{"name": n, "t_start": float(s), "t_end": float(e), "t_mid": float(m),
+                       "trained": bool(k)}
+                      for n, s, e, m, k in zip(f.names, f.t_start, f.t_end, f.mid_times(), trained)],
+           "renders": [{"name": r.name, "t": float(r.t)} for r in scene.renders]}
+    write_text(path, json.dumps(doc, indent=2) + "\n")
+    return doc

@@ -100,7 +100,7 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
                      gt_dir: Path | None, heldout: tuple[dict, dict] | None = None,
                      anchor: ColourAnchor | None = None,
                      unanchored: dict[str, np.ndarray] | None = None,
-                     render_only: dict[str, np.ndarray] | None = None) -> dict:
+                     render_only: dict[str, np.ndarray] | None = None, ply: dict | None = None) -> dict:
     """metrics.json and report.png; returns the metrics.
 
     Against truth when ``gt_dir`` holds images named like the outputs; always the no-reference
@@ -108,7 +108,9 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     ``heldout`` (from :func:`score_holdout`), the held-out scores and pictures. With no frame or
     an applied colour ``anchor`` (``images`` anchored, ``unanchored`` before), also the colour
     figures of :func:`fusiongs.eval.evaluate.colour_metrics` and the anchor. ``render_only``: the
-    deblurred frames before the exposure-ratio correction, scored as ``fusiongs_render``.
+    deblurred frames before the exposure-ratio correction, scored as ``fusiongs_render``. ``ply``:
+    the figures of ``model.ply``'s display fit (:meth:`fusiongs.outputs.display_ply.DisplayFit.as_dict`),
+    written as ``model_ply``.
     """
     from fusiongs.eval.evaluate import colour_metrics
     from fusiongs.eval.holdout import compare_sharpness
@@ -143,6 +145,8 @@ def evaluate_outputs(tr: Trained, scene: Scene, images: dict[str, np.ndarray], o
     result["backward_seconds"] = tr.history.backward_seconds
     result["iterations"] = tr.iteration
     result["n_gaussians"] = tr.state.model.n
+    if ply is not None:
+        result["model_ply"] = ply
     write_text(out / "metrics.json", json.dumps(result, indent=2) + "\n")
     write_report(out / "report.png", result, tr.history, methods, gt,
                  heldout=heldout[1] if heldout is not None else None)
@@ -310,9 +314,11 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         log(EVENT_ONLY_NOTE)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
     write_anchor(out, anchor)  # for `fusiongs render`; an earlier run's is removed when there is none
-    unanchored, images, render_only = write_outputs(
+    unanchored, images, render_only, ply = write_outputs(
         tr, scene, out, functools.partial(apply_anchor, anchor) if anchor.applied else None,
         kept if held.size else None, (anchor.gain, anchor.offset) if anchor.applied else None)
+    log(f"model.ply: colours fitted for 3DGS viewers (display-space compositing), {ply.psnr_after:.2f} dB "
+        f"from the run's renders ({ply.psnr_before:.2f} dB unfitted), {ply.seconds:.1f} s")
     if anchor.applied:
         log(f"colour: {anchor.label}, gain {_fmt(anchor.gain)}, offset {_fmt(anchor.offset)} (linear)")
     if (out / EXPOSURE_FILE).is_file():
@@ -329,7 +335,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")
         log(format_heldout(heldout[0]))
     result = evaluate_outputs(tr, scene, images, out, scene.root / "gt" if scene.root else None, heldout,
-                              anchor, unanchored, render_only)
+                              anchor, unanchored, render_only, ply.as_dict())
     if "mean" in result:
         log(format_table(result))
         if "affine_fit" in result:

@@ -20,10 +20,17 @@ below 0 and its power law above 1, which keeps it invertible on every real)::
     f_dc   = (S(c) - 0.5) / SH_C0          so  clip(SH_C0 f_dc + 0.5, 0, 1) = S(clip(c, 0, 1))
     f_rest = S'(c) * shN                   (first order: the display change of view dependence)
 
-which is exactly what ``fusiongs deblur`` shows for the base colour. :func:`load_ply` inverts
-both (``sh0`` from ``S^-1``, ``shN`` divided by the same slope), so a write/read round trip
+which is exactly what ``fusiongs deblur`` shows for one Gaussian's base colour. :func:`load_ply`
+inverts both (``sh0`` from ``S^-1``, ``shN`` divided by the same slope), so a write/read round trip
 returns the model up to float32 rounding; a PLY of another tool (trained on sRGB images) loads
 as the equivalent linear model.
+
+Per Gaussian this is exact, but a viewer composites the display values, ``sum_i w_i S(c_i)``,
+where fusiongs shows ``S(sum_i w_i c_i)``: wherever Gaussians of different colours overlap the
+two differ. ``fusiongs deblur`` therefore writes ``model.ply`` from a copy whose colours and
+opacities were fitted for display-space compositing (:mod:`fusiongs.outputs.display_ply`), with
+``save_ply(..., colours="display")``; ``load_ply(..., colours="display")`` reads such coefficients
+back as they are stored.
 """
 
 from __future__ import annotations
@@ -83,15 +90,38 @@ def linear_sh(f_dc: torch.Tensor, f_rest: torch.Tensor) -> tuple[torch.Tensor, t
     return ((c - 0.5) / SH_C0)[:, None, :], f_rest.double() / slope[:, None, :]
 
 
-def save_ply(model: GaussianModel, path: str | Path) -> None:
-    """Write ``model`` as an Inria-layout binary PLY, atomically (temporary file, then rename);
-    colours as display (sRGB-encoded) coefficients, see the module docstring."""
+COLOURS = ("linear", "display")  # what the SH coefficients of a model given to save_ply hold
+
+
+def save_ply(model: GaussianModel, path: str | Path, *, colours: str = "linear", comment: str = "") -> None:
+    """Write ``model`` as an Inria-layout binary PLY, atomically (temporary file, then rename).
+
+    Args:
+        model: the Gaussians.
+        path: the file to write.
+        colours: ``"linear"``: ``model`` is a linear-light model (fusiongs' own) and its colours are
+            written as display coefficients by :func:`display_sh` (see the module docstring);
+            ``"display"``: its SH coefficients already are display values (e.g. fitted for
+            display-space compositing, :mod:`fusiongs.outputs.display_ply`) and are written as
+            they are.
+        comment: an optional one-line header comment (ASCII) saying what the file holds.
+
+    Raises:
+        InputError: an unknown ``colours``, or a comment that is not one ASCII line.
+    """
+    if colours not in COLOURS:
+        raise InputError("save_ply", "colours", " or ".join(repr(c) for c in COLOURS), repr(colours))
+    if not comment.isascii() or "\n" in comment or "\r" in comment:
+        raise InputError("save_ply", "comment", "one line of ASCII text", repr(comment))
     path = Path(path)
     k = model.max_sh_degree + 1
     k = k * k
     n = model.n
     with torch.no_grad():
-        f_dc, f_rest = display_sh(model.sh0.cpu(), model.shN.cpu())
+        if colours == "linear":
+            f_dc, f_rest = display_sh(model.sh0.cpu(), model.shN.cpu())
+        else:
+            f_dc, f_rest = model.sh0[:, 0].cpu(), model.shN.cpu()
         cols = [model.means, torch.zeros_like(model.means), f_dc,
                 f_rest.transpose(1, 2).reshape(n, -1), model.opacity_logits[:, None],
                 model.log_scales, model.quats]
@@ -101,7 +131,8 @@ def save_ply(model: GaussianModel, path: str | Path) -> None:
     for i, name in enumerate(names):
         rec[name] = data[:, i]
     header = ("ply\nformat binary_little_endian 1.0\ncomment written by fusiongs\n"
-              f"element vertex {n}\n" + "".join(f"property float {nm}\n" for nm in names)
+              + (f"comment {comment}\n" if comment else "")
+              + f"element vertex {n}\n" + "".join(f"property float {nm}\n" for nm in names)
               + "end_header\n")
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         f.write(header.encode("ascii"))
@@ -138,16 +169,25 @@ def _parse_header(path: Path, raw: bytes) -> tuple[int, list[tuple[str, int, np.
     return nl + 1, [(name, count, np.dtype(props)) for name, count, props in elements]
 
 
-def load_ply(path: str | Path) -> GaussianModel:
+def load_ply(path: str | Path, *, colours: str = "linear") -> GaussianModel:
     """Read an Inria-layout Gaussian PLY (properties by name, any order and scalar type).
+
+    Args:
+        path: the file.
+        colours: ``"linear"``: the file's display colours become a linear-light model
+            (:func:`linear_sh`, the inverse of :func:`save_ply`'s conversion); ``"display"``: the
+            SH coefficients are returned as stored (what a 3DGS viewer composites).
 
     Returns:
         A float32 CPU :class:`GaussianModel` with ``active_sh_degree = max_sh_degree``.
 
     Raises:
         InputError: naming the file and the missing property, bad format, truncated data, or an
-            ``f_rest`` count that is not ``3((d+1)^2 - 1)`` for a degree ``d <= 3``.
+            ``f_rest`` count that is not ``3((d+1)^2 - 1)`` for a degree ``d <= 3``; an unknown
+            ``colours``.
     """
+    if colours not in COLOURS:
+        raise InputError("load_ply", "colours", " or ".join(repr(c) for c in COLOURS), repr(colours))
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -185,7 +225,8 @@ def load_ply(path: str | Path) -> GaussianModel:
         return torch.from_numpy(out)
 
     f_rest = cols(*[f"f_rest_{i}" for i in range(n_rest)]).reshape(n, 3, k - 1).transpose(1, 2)
-    sh0, shN = linear_sh(cols("f_dc_0", "f_dc_1", "f_dc_2"), f_rest)
+    f_dc = cols("f_dc_0", "f_dc_1", "f_dc_2")
+    sh0, shN = linear_sh(f_dc, f_rest) if colours == "linear" else (f_dc[:, None, :], f_rest)
     return GaussianModel(
         means=cols("x", "y", "z"), log_scales=cols("scale_0", "scale_1", "scale_2"),
         quats=cols("rot_0", "rot_1", "rot_2", "rot_3"), opacity_logits=cols("opacity")[:, 0],

@@ -249,8 +249,14 @@ class OutputSettings:
     exposure: Literal["auto", "none"] = "auto"  # scenes without frames: one linear gain puts the
                                      # renders' 99.5th percentile at 0.9 (their level is arbitrary);
                                      # none: as rendered (train/render_io.py: exposure_gain)
+    ply_fit_steps: int = 300         # model.ply: Adam steps fitting its colours and opacities so that
+                                     # 3DGS viewers, compositing them as stored, show the run's renders;
+                                     # 0 = each Gaussian's colour sRGB-encoded (outputs/display_ply.py)
 
     def __post_init__(self) -> None:
+        if self.ply_fit_steps < 0:
+            raise ConfigError("config", "output.ply_fit_steps", "an integer >= 0 (0 = no fit)",
+                              repr(self.ply_fit_steps))
         if not self.ratio_eps > 0:
             raise ConfigError("config", "output.ratio_eps", "a number > 0 (linear units)",
                               repr(self.ratio_eps))

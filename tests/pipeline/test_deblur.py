@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -43,6 +44,12 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     # them (deblurred frames and the requested renders at their mid-exposure; novel ones stay renders)
     deb = metrics["mean"]["deblur"]
     assert deb["fusiongs"]["psnr"] > deb["fusiongs_render"]["psnr"] + 8
+    # frames.json places the frames in time for `fusiongs view`; model.ply's display fit is scored
+    frames = json.loads((tiny_run / "frames.json").read_text())
+    assert [f["name"] for f in frames["frames"]] == list(scene.frames.names)
+    assert [f["t_mid"] for f in frames["frames"]] == pytest.approx(list(scene.frames.mid_times()))
+    assert frames["scene"] == str(Path(tiny_scene).resolve()) and all(f["trained"] for f in frames["frames"])
+    assert metrics["model_ply"]["psnr_after"] >= metrics["model_ply"]["psnr_before"]
     rows = [json.loads(line) for line in (tiny_run / "history.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == list(range(10))
     assert all(r["loss"] is not None and r["n_gaussians"] > 0 and len(r["theta_pos"]) == 1 for r in rows)
@@ -165,6 +172,9 @@ def test_holdout_without_truth_scores_held_out_frames_and_writes_report(three_fr
     # trained on the two kept frames; outputs still cover every frame
     assert load_checkpoint(out / "checkpoint.pt")["log_gain"].numel() == 2
     assert sorted(p.stem for p in (out / "deblurred").glob("*.png")) == ["000000", "000001", "000002"]
+    frames = json.loads((out / "frames.json").read_text())["frames"]
+    assert [(f["name"], f["trained"]) for f in frames] == [("000000", True), ("000001", False),
+                                                           ("000002", True)]
     metrics = json.loads((out / "metrics.json").read_text())
     assert "mean" not in metrics and "gt/" in metrics["note"]
     assert metrics["heldout"]["mean"] == doc["mean"]
