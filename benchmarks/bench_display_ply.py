@@ -9,7 +9,7 @@ written (what ``fusiongs deblur`` now writes as ``model.ply``).
 
 The instants come from RUN/frames.json, or, for a run written before it, from SCENE/scene.json.
 
-    PYTHONPATH=. python benchmarks/bench_display_ply.py RUN [--scene SCENE] [--steps 300] \\
+    PYTHONPATH=. python benchmarks/bench_display_ply.py RUN [--scene SCENE] [--steps 100] \\
         [-o fitted.ply] [--json out.json]
 """
 

@@ -102,7 +102,8 @@ def row_of(seed: int, chunk: float, res: dict) -> dict:
 
 def format_rows(rows: list[dict]) -> str:
     head = (f"{'seed':>6}{'chunk s':>9}{'frames':>8}{'blurry':>8}{'EDI true θ':>12}{'fusiongs':>10}"
-            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'minutes':>9}{'peak GB':>9}  overrides")
+            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'minutes':>9}{'peak GB':>9}"
+            "  overrides")
     lines = [head]
     for r in rows:
         lines.append(f"{r['seed']:>6}{r['chunk']:>9g}{r['frames']:>8}{r['blurry']:>8.2f}"

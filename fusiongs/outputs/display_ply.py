@@ -42,7 +42,7 @@ class DisplayFitOptions:
         lr_opacity: Adam's step on the opacity logits (0: opacities kept).
     """
 
-    steps: int = 300
+    steps: int = 100
     views: int = 8
     max_width: int = 128
     lr_colour: float = 0.01

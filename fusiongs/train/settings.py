@@ -249,7 +249,7 @@ class OutputSettings:
     exposure: Literal["auto", "none"] = "auto"  # scenes without frames: one linear gain puts the
                                      # renders' 99.5th percentile at 0.9 (their level is arbitrary);
                                      # none: as rendered (train/render_io.py: exposure_gain)
-    ply_fit_steps: int = 300         # model.ply: Adam steps fitting its colours and opacities so that
+    ply_fit_steps: int = 100         # model.ply: Adam steps fitting its colours and opacities so that
                                      # 3DGS viewers, compositing them as stored, show the run's renders;
                                      # 0 = each Gaussian's colour sRGB-encoded (outputs/display_ply.py)
 
