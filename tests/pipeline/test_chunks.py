@@ -118,6 +118,17 @@ def test_a_long_recording_of_a_dataset_is_cut_into_chunks(long_scene, tmp_path):
     assert row["status"] == "done" and row["psnr"]["fusiongs"] == stitched["fusiongs"]["psnr"]
 
 
+@pytest.mark.slow
+def test_the_chunks_of_a_recording_run_on_a_dask_cluster_started_for_the_run(long_scene, tmp_path):
+    pytest.importorskip("distributed")
+    out = tmp_path / "out"
+    assert main(["deblur", str(long_scene), "-o", str(out), "--executor", "dask", "--jobs", "2",
+                 *TINY, *CHUNKED]) == 0
+    index = json.loads((out / CHUNKS_FILE).read_text())["chunks"]
+    assert len(index) == 3 and all((out / "chunks" / f"{k:03d}" / "run" / PIECE_FILE).is_file() for k in range(3))
+    assert sorted(n for c in index for n in c["frames"]) == sorted(load_scene(long_scene).frames.names)
+
+
 def test_a_recording_no_longer_than_a_chunk_runs_in_one_piece(long_scene, tmp_path):
     out = tmp_path / "out"
     assert main(["deblur", str(long_scene), "-o", str(out), "chunk.seconds=5", *TINY]) == 0
