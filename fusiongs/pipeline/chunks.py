@@ -1,18 +1,19 @@
 """``fusiongs deblur`` of a long recording in overlapping time chunks (``chunk.seconds``).
 
-One Gaussian scene with one budget does not hold a recording whose view keeps changing (a walk
-down a corridor): its far bound, its Gaussians and its iterations are spread over everything the
-camera ever saw. Past ``chunk.seconds`` the recording is cut into chunks of at most that length
-that share ``chunk.overlap`` seconds with their neighbours (:func:`plan_chunks`). The thresholds are
-calibrated once, on the whole recording; each chunk is then written as a scene folder of its own
-(``OUT/chunks/NNN/scene/``: its frames, events, trajectory piece and truth images) and deblurred
-into ``OUT/chunks/NNN/run/`` as one piece (:mod:`fusiongs.pipeline.executor`: in parallel,
-checkpointed and resumed one by one, as the recordings of a dataset are), with its own scene
-extent, far bound, Gaussian budget and iterations. The results are stitched: every frame, render
-instant and trajectory sample is taken from the chunk in whose middle it lies (:func:`owners`),
-into ``OUT/deblurred/``, ``OUT/deblurred.mp4``, ``OUT/renders/`` and ``OUT/trajectory.txt``;
-``OUT/chunks.json`` lists the chunks (spans, frames, PLY files) and ``OUT/metrics.json`` scores the
-stitched frames against the truth, where the recording has it.
+One Gaussian scene with one budget does not hold a recording whose view keeps changing (a walk down
+a corridor): its far bound, its Gaussians and its iterations are spread over everything the camera
+ever saw. Past ``chunk.seconds`` the recording is cut into chunks of at most that length that share
+``chunk.overlap`` seconds with their neighbours (:func:`plan_chunks`). The thresholds are calibrated
+once for the whole recording, on its middle exposures (:func:`calibration_window`); each chunk is
+then written as a scene folder of its own (``OUT/chunks/NNN/scene/``: its frames, events, trajectory
+piece and truth images) and deblurred into ``OUT/chunks/NNN/run/`` as one piece
+(:mod:`fusiongs.pipeline.executor`: in parallel, checkpointed and resumed one by one, as the
+recordings of a dataset are), with its own scene extent, far bound, Gaussian budget and iterations.
+The results are stitched: every frame, render instant and trajectory sample is taken from the chunk
+in whose middle it lies (:func:`owners`), into ``OUT/deblurred/``, ``OUT/deblurred.mp4``,
+``OUT/renders/`` and ``OUT/trajectory.txt``; ``OUT/chunks.json`` lists the chunks (spans, frames,
+PLY files) and ``OUT/metrics.json`` scores the stitched frames against the truth, where the
+recording has it.
 
 Without a given trajectory each chunk poses its own frames, in a frame of its own: each chunk's
 path is then brought onto the previous chunk's by the similarity that best maps its camera centres
@@ -37,6 +38,7 @@ from fusiongs.pipeline.dataset import PieceTask, raise_failed, read_piece, run_a
 
 CHUNKS_FILE = "chunks.json"
 CHUNKS_DIR = "chunks"
+CALIBRATION_FRAMES = 48  # the thresholds of a chunked recording come from its middle 48 exposures
 
 
 def plan_chunks(t_first: float, t_last: float, seconds: float, overlap: float) -> list[tuple[float, float]]:
@@ -79,6 +81,21 @@ def check_chunks(scene: Scene, seconds: float, overlap: float) -> None:
     if seconds - overlap < longest or seconds < 2 * longest:
         raise ConfigError("config", "chunk.seconds", f"at least two exposures ({2 * longest:g} s) and "
                           f"more than chunk.overlap plus one exposure ({overlap + longest:g} s)", seconds)
+
+
+def calibration_window(scene: Scene, frames: int | None = None) -> Scene:
+    """The middle ``frames`` (default :data:`CALIBRATION_FRAMES`) whole exposures of ``scene`` with
+    their events, or the whole scene when it has no more: what the thresholds of a chunked
+    recording are estimated on. The estimate's cost grows with the frames (every frame pair at
+    every candidate threshold: 240 frames of a 20 s walk take minutes), and 12-96 frames is the
+    range its accuracy was measured on."""
+    frames = CALIBRATION_FRAMES if frames is None else frames
+    fs = scene.frames
+    if len(fs) <= frames:
+        return scene
+    first = (len(fs) - frames) // 2
+    return chunk_scene(scene, float(fs.t_start[first:first + frames].min()),
+                       float(fs.t_end[first:first + frames].max()))
 
 
 def chunk_scene(scene: Scene, t0: float, t1: float) -> Scene:
@@ -267,7 +284,8 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
         thresholds = read_calibration(calib_file)[0]
     elif cfg.threshold.estimate and scene.events is not None and len(scene.events):
         try:  # once, on the whole recording, as a single run would estimate them
-            thresholds = estimate_thresholds(scene.frames, scene.events,
+            part = calibration_window(scene)
+            thresholds = estimate_thresholds(part.frames, part.events,
                                              CalibrateOptions(unknown_scale=cfg.threshold.init))
             write_calibration(calib_file, thresholds, scene=str(scene_path))
         except InputError as e:  # too little data: each chunk starts from threshold.init
@@ -292,7 +310,7 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
     intro = (f"{len(spans)} chunk(s) of at most {cfg.chunk.seconds:g} s (overlap {cfg.chunk.overlap:g} s) "
              f"over {spans[0][0]:.2f}-{spans[-1][1]:.2f} s")
     raise_failed(run_all(tasks, intro, jobs=jobs, executor=executor, address=address, log=log,
-                         label="chunk "), "chunk", out / CHUNKS_DIR)
+                         label="chunk ", equal=True), "chunk", out / CHUNKS_DIR)
     index = stitch(scene, spans, runs, out, cfg.output.video_fps)
     metrics = score(scene, out, thresholds)
     if metrics is not None:

@@ -11,7 +11,15 @@ import pytest
 from fusiongs.cli import main
 from fusiongs.errors import ConfigError
 from fusiongs.io.scene_io import load_scene, recording_span
-from fusiongs.pipeline.chunks import CHUNKS_FILE, check_chunks, chunk_scene, owners, plan_chunks, scene_span
+from fusiongs.pipeline.chunks import (
+    CHUNKS_FILE,
+    calibration_window,
+    check_chunks,
+    chunk_scene,
+    owners,
+    plan_chunks,
+    scene_span,
+)
 from fusiongs.pipeline.dataset import PIECE_FILE
 from fusiongs.train.checkpoint import load_checkpoint
 from tests.conftest import TINY, simulated_scene
@@ -52,6 +60,15 @@ def test_a_chunk_holds_its_whole_exposures_its_events_and_a_path_around_it(long_
     assert part.events.t[0] >= t0 * 1e6 and part.events.t[-1] <= t1 * 1e6 + 1
     assert len(part.events) == int(((scene.events.t >= t0 * 1e6) & (scene.events.t <= t1 * 1e6 + 1)).sum())
     assert part.poses.t[0] <= t0 and part.poses.t[-1] >= t1
+
+
+def test_a_chunked_recording_is_calibrated_on_its_middle_exposures(long_scene):
+    scene = load_scene(long_scene)
+    assert calibration_window(scene, 8) is scene
+    part = calibration_window(scene, 4)
+    assert list(part.frames.names) == list(scene.frames.names[2:6])
+    assert part.events.t[0] >= scene.frames.t_start[2] * 1e6
+    assert part.events.t[-1] <= scene.frames.t_end[5] * 1e6 + 1
 
 
 def test_a_chunk_shorter_than_two_exposures_is_refused(long_scene, tmp_path, capsys):
@@ -125,7 +142,8 @@ def test_the_chunks_of_a_recording_run_on_a_dask_cluster_started_for_the_run(lon
     assert main(["deblur", str(long_scene), "-o", str(out), "--executor", "dask", "--jobs", "2",
                  *TINY, *CHUNKED]) == 0
     index = json.loads((out / CHUNKS_FILE).read_text())["chunks"]
-    assert len(index) == 3 and all((out / "chunks" / f"{k:03d}" / "run" / PIECE_FILE).is_file() for k in range(3))
+    assert len(index) == 3
+    assert all((out / "chunks" / f"{k:03d}" / "run" / PIECE_FILE).is_file() for k in range(3))
     assert sorted(n for c in index for n in c["frames"]) == sorted(load_scene(long_scene).frames.names)
 
 
