@@ -7,8 +7,10 @@ exposure and sensor, from the simulator's sweep with walk presets) of ``--durati
 0 = one piece), each run in a child process so that its wall time and peak memory (the largest
 resident set of the run and its workers) are its own. The table gives, over all frames, the PSNR
 of the blurry input, EDI with the true thresholds and fusiongs, the worst frame's margin over its
-blurry input, the frames next to a seam against the others, minutes and peak memory. Defaults
-are chosen on ``--split tuning``; figures are reported from ``--split test`` only.
+blurry input, the frames next to a seam against the others (their PSNR; and the gain over EDI of
+the frames within ``SEAM_REACH`` of a seam frame against the other frames' gain, in which each
+frame's own difficulty cancels), minutes and peak memory. Defaults are chosen on ``--split
+tuning``; figures are reported from ``--split test`` only.
 
     PYTHONPATH=. python benchmarks/bench_walk.py --split test --seeds 1000,1001 --chunks 0,10
     PYTHONPATH=. python benchmarks/bench_walk.py --split tuning --seeds 0 --size 96x72 --duration 10 \\
@@ -85,6 +87,9 @@ def _seams(out: Path) -> list[str]:
     return [name for a, b in zip(chunks, chunks[1:]) for name in (a["frames"][-1:] + b["frames"][:1])]
 
 
+SEAM_REACH = 5  # frames either side of a seam frame that count as near it
+
+
 def row_of(seed: int, chunk: float, res: dict) -> dict:
     """One table row: means over all frames, the worst frame over the blurry input, seam frames."""
     views = {n: v for n, v in res["metrics"]["views"].items() if n.startswith("deblur_")}
@@ -92,23 +97,32 @@ def row_of(seed: int, chunk: float, res: dict) -> dict:
            for m in ("fusiongs", "blurry", "edi_true_theta")}
     names = [n.removeprefix("deblur_") for n in views]
     seam = np.isin(names, res["chunks"])
+    # frames within SEAM_REACH of a seam frame: their gain over EDI (which has no seams, so the
+    # frames' own difficulty cancels) against the other frames'
+    at = np.flatnonzero(seam)
+    near = (np.abs(np.arange(len(names))[:, None] - at[None]).min(axis=1) <= SEAM_REACH) if at.size \
+        else np.zeros(len(names), bool)
+    gain = per["fusiongs"] - per["edi_true_theta"]
     return {"seed": seed, "chunk": chunk, "fusiongs": float(per["fusiongs"].mean()),
             "blurry": float(per["blurry"].mean()), "edi_true": float(per["edi_true_theta"].mean()),
             "worst_vs_blurry": float((per["fusiongs"] - per["blurry"]).min()),
             "seam_vs_others": float(per["fusiongs"][seam].mean() - per["fusiongs"][~seam].mean())
             if seam.any() and (~seam).any() else float("nan"),
+            "near_seam_gain_vs_others": float(gain[near].mean() - gain[~near].mean())
+            if near.any() and (~near).any() else float("nan"),
             "minutes": res["wall_s"] / 60, "peak_gb": res["peak_gb"], "frames": len(views)}
 
 
 def format_rows(rows: list[dict]) -> str:
     head = (f"{'seed':>6}{'chunk s':>9}{'frames':>8}{'blurry':>8}{'EDI true θ':>12}{'fusiongs':>10}"
-            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'minutes':>9}{'peak GB':>9}"
-            "  overrides")
+            f"{'vs EDI':>8}{'worst vs blurry':>17}{'seams vs rest':>15}{'near seams vs EDI':>19}"
+            f"{'minutes':>9}{'peak GB':>9}  overrides")
     lines = [head]
     for r in rows:
         lines.append(f"{r['seed']:>6}{r['chunk']:>9g}{r['frames']:>8}{r['blurry']:>8.2f}"
                      f"{r['edi_true']:>12.2f}{r['fusiongs']:>10.2f}{r['fusiongs'] - r['edi_true']:>+8.2f}"
-                     f"{r['worst_vs_blurry']:>+17.2f}{r['seam_vs_others']:>+15.2f}{r['minutes']:>9.1f}"
+                     f"{r['worst_vs_blurry']:>+17.2f}{r['seam_vs_others']:>+15.2f}"
+                     f"{r.get('near_seam_gain_vs_others', float('nan')):>+19.2f}{r['minutes']:>9.1f}"
                      f"{r['peak_gb']:>9.2f}  {r.get('tag') or '-'}")
     return "\n".join(lines)
 

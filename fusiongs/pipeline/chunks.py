@@ -310,7 +310,7 @@ def run_chunked(scene_path: str | Path, out: str | Path, *, config: str | Path |
     intro = (f"{len(spans)} chunk(s) of at most {cfg.chunk.seconds:g} s (overlap {cfg.chunk.overlap:g} s) "
              f"over {spans[0][0]:.2f}-{spans[-1][1]:.2f} s")
     raise_failed(run_all(tasks, intro, jobs=jobs, executor=executor, address=address, log=log,
-                         label="chunk ", equal=True), "chunk", out / CHUNKS_DIR)
+                         label="chunk "), "chunk", out / CHUNKS_DIR)
     index = stitch(scene, spans, runs, out, cfg.output.video_fps)
     metrics = score(scene, out, thresholds)
     if metrics is not None:

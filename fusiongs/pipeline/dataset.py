@@ -21,7 +21,7 @@ from pathlib import Path
 
 from fusiongs.atomic import write_text
 from fusiongs.errors import FusionGSError, InputError
-from fusiongs.pipeline.executor import default_jobs, packed_jobs, run_pieces
+from fusiongs.pipeline.executor import default_jobs, run_pieces
 
 PIECE_FILE = "piece.json"
 SUMMARY_FILE = "summary.json"
@@ -147,14 +147,11 @@ def format_summary(rows: Sequence[dict]) -> str:
 
 
 def run_all(tasks: Sequence[PieceTask], intro: str, *, jobs: int | None, executor: str,
-            address: str | None, log: Callable[..., None], label: str = "", equal: bool = False
-            ) -> list[dict]:
-    """Run the pieces ``tasks`` (:func:`run_piece`), ``jobs`` at a time (None or 0: one per core,
-    or, for pieces of about ``equal`` work, :func:`~fusiongs.pipeline.executor.packed_jobs`),
+            address: str | None, log: Callable[..., None], label: str = "") -> list[dict]:
+    """Run the pieces ``tasks`` (:func:`run_piece`), ``jobs`` at a time (None or 0: one per core),
     logging ``intro`` with the plan first and one line per finished piece (``label`` before its
     name); returns their rows in the order of ``tasks``."""
-    if jobs in (None, 0):
-        jobs = packed_jobs(len(tasks)) if equal else default_jobs(len(tasks))
+    jobs = default_jobs(len(tasks)) if jobs in (None, 0) else jobs
     log(f"{intro}: {len(tasks)} to run, {jobs} at a time ({executor})")
 
     def done(row: dict) -> None:

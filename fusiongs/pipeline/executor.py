@@ -34,19 +34,6 @@ def default_jobs(n_pieces: int, cores: int | None = None) -> int:
     return max(1, min(n_pieces, cores))
 
 
-def packed_jobs(n_pieces: int, cores: int | None = None) -> int:
-    """Workers for ``n_pieces`` pieces of about equal work (the time chunks of one recording):
-    the count ``w`` between ``cores`` and ``2 cores`` (at most ``n_pieces``) whose rounds end
-    soonest, ``ceil(n / w) * max(w, cores) / cores`` in units of one piece on one core, the
-    smallest on a tie. Three chunks on two cores run three at once (1.5 units, not 2): the cores
-    stay busy to the end instead of idling while the last piece runs alone."""
-    cores = cores or os.cpu_count() or 1
-    n = max(1, n_pieces)
-    if n <= cores:
-        return n
-    return min(range(cores, min(n, 2 * cores) + 1), key=lambda w: (-(-n // w) * w / cores, w))
-
-
 def worker_threads(jobs: int, cores: int | None = None) -> int:
     """torch threads of each of ``jobs`` workers on ``cores`` cores: ``max(1, cores // jobs)``."""
     cores = cores or os.cpu_count() or 1

@@ -12,7 +12,7 @@ import pytest
 from fusiongs.cli import main
 from fusiongs.errors import InputError
 from fusiongs.pipeline.dataset import PIECE_FILE, SUMMARY_FILE, dataset_scenes, format_summary
-from fusiongs.pipeline.executor import default_jobs, packed_jobs, run_pieces, worker_threads
+from fusiongs.pipeline.executor import default_jobs, run_pieces, worker_threads
 from tests.conftest import TINY
 
 
@@ -20,13 +20,6 @@ def test_workers_share_the_cores():
     assert worker_threads(2, cores=2) == 1 and worker_threads(1, cores=2) == 2
     assert worker_threads(3, cores=2) == 1 and worker_threads(2, cores=16) == 8
     assert default_jobs(5, cores=2) == 2 and default_jobs(1, cores=16) == 1 and default_jobs(0, cores=4) == 1
-
-
-def test_equal_pieces_run_in_the_fewest_core_rounds():
-    # three chunks on two cores at once (1.5 rounds of one core, not 2); never fewer than the cores
-    # or more than twice the cores; as many as the pieces up to the cores
-    assert [packed_jobs(n, cores=2) for n in range(1, 9)] == [1, 2, 3, 2, 2, 2, 2, 2]
-    assert packed_jobs(5, cores=4) == 5 and packed_jobs(9, cores=4) == 5 and packed_jobs(8, cores=4) == 4
 
 
 def test_run_pieces_keeps_the_order_of_the_tasks_in_every_executor():
