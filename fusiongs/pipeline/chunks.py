@@ -34,7 +34,7 @@ from fusiongs.atomic import write_text
 from fusiongs.camera.tum import PoseSamples, read_tum, write_tum
 from fusiongs.errors import ConfigError, FusionGSError, InputError
 from fusiongs.io.scene import Scene
-from fusiongs.pipeline.dataset import PieceTask, raise_failed, read_piece, run_all
+from fusiongs.pipeline.pieces import PieceTask, raise_failed, read_piece, run_all
 
 CHUNKS_FILE = "chunks.json"
 CHUNKS_DIR = "chunks"

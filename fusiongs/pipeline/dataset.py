@@ -13,19 +13,14 @@ says done are not run again, and the others resume from their own checkpoints.
 from __future__ import annotations
 
 import json
-import time
-import traceback
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 from fusiongs.atomic import write_text
-from fusiongs.errors import FusionGSError, InputError
-from fusiongs.pipeline.executor import default_jobs, run_pieces
+from fusiongs.errors import InputError
+from fusiongs.pipeline.pieces import PieceTask, raise_failed, read_piece, run_all
 
-PIECE_FILE = "piece.json"
 SUMMARY_FILE = "summary.json"
-LOG_FILE = "log.txt"
 
 
 def dataset_scenes(root: str | Path, check: bool = True) -> list[Path]:
@@ -43,42 +38,6 @@ def dataset_scenes(root: str | Path, check: bool = True) -> list[Path]:
     return found
 
 
-@dataclass(frozen=True)
-class PieceTask:
-    """One recording of a dataset: what :func:`run_piece` needs (plain values, so it pickles)."""
-
-    name: str
-    scene: str
-    out: str
-    config: str | None
-    overrides: tuple[str, ...]
-    calibration: str | None
-    holdout: str | None
-    resume: bool
-    whole: bool = False              # a whole recording (of a dataset): cut into time chunks, one after
-                                     # another in this piece's process, when it outlasts chunk.seconds
-
-
-def read_piece(out: str | Path) -> dict | None:
-    """The finished row in ``out/piece.json``, or None when the piece has not finished."""
-    path = Path(out) / PIECE_FILE
-    try:
-        row = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    return row if isinstance(row, dict) and row.get("status") == "done" else None
-
-
-def summary_row(name: str, metrics: dict, wall_seconds: float) -> dict:
-    """The table's row of a finished run from its metrics (``metrics.json``'s content)."""
-    deblur = metrics.get("mean", {}).get("deblur", {})
-    held = metrics.get("heldout", {}).get("mean", {})
-    return {"name": name, "status": "done", "wall_seconds": round(wall_seconds, 1),
-            "iterations": metrics.get("iterations"),
-            "psnr": {m: v["psnr"] for m, v in deblur.items()},
-            "heldout_psnr": {m: v["psnr"] for m, v in held.items()}}
-
-
 def longer_than_a_chunk(scene: str | Path, config: str | Path | None, overrides: Sequence[str]) -> bool:
     """Whether the recording ``scene`` outlasts ``chunk.seconds`` of its config (read from
     ``scene.json`` and the event file's ends alone); one that does not is deblurred in one piece,
@@ -93,39 +52,19 @@ def longer_than_a_chunk(scene: str | Path, config: str | Path | None, overrides:
     return t1 - t0 > seconds
 
 
-def run_piece(task: PieceTask) -> dict:
-    """Deblur one recording into ``task.out``; returns its summary row, ``status`` "done" or
-    "failed" (with ``error``: the one line ``fusiongs deblur`` would have printed)."""
+def deblur_recording(scene: str | Path, out: str | Path, **kw) -> dict:
+    """One recording of a dataset, as ``fusiongs deblur SCENE -o OUT`` would: in time chunks, one
+    after another in this process, when it outlasts ``chunk.seconds``
+    (:func:`fusiongs.pipeline.chunks.run_chunked`), else in one piece
+    (:func:`fusiongs.pipeline.deblur.run_deblur`); ``kw`` are their common arguments. Returns the
+    metrics."""
+    if longer_than_a_chunk(scene, kw.get("config"), kw.get("overrides", ())):
+        from fusiongs.pipeline.chunks import run_chunked
+
+        return run_chunked(scene, out, jobs=1, executor="serial", **kw).get("metrics", {})
     from fusiongs.pipeline.deblur import run_deblur
 
-    out = Path(task.out)
-    out.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
-    with open(out / LOG_FILE, "a", encoding="utf-8") as log_file:
-        def log(*parts) -> None:
-            print(*parts, file=log_file, flush=True)
-
-        try:
-            if task.whole and longer_than_a_chunk(task.scene, task.config, task.overrides):
-                from fusiongs.pipeline.chunks import run_chunked
-
-                metrics = run_chunked(task.scene, out, config=task.config, overrides=task.overrides,
-                                      resume=task.resume, log=log, calibration=task.calibration,
-                                      holdout=task.holdout, jobs=1, executor="serial").get("metrics", {})
-            else:
-                metrics = run_deblur(task.scene, out, config=task.config, overrides=task.overrides,
-                                     resume=task.resume, log=log, calibration=task.calibration,
-                                     holdout=task.holdout)
-        except Exception as e:  # noqa: BLE001 (a piece reports its failure; the others go on)
-            if not isinstance(e, FusionGSError):
-                log(traceback.format_exc())
-            error = str(e) if isinstance(e, FusionGSError) else f"{type(e).__name__}: {e} (see {LOG_FILE})"
-            log(f"error: {error}")
-            return {"name": task.name, "status": "failed", "error": error,
-                    "wall_seconds": round(time.perf_counter() - start, 1)}
-    row = summary_row(task.name, metrics, time.perf_counter() - start)
-    write_text(out / PIECE_FILE, json.dumps(row, indent=2) + "\n")
-    return row
+    return run_deblur(scene, out, **kw)
 
 
 def format_summary(rows: Sequence[dict]) -> str:
@@ -144,30 +83,6 @@ def format_summary(rows: Sequence[dict]) -> str:
                      f"{cell(p, 'fusiongs')}{cell(p, 'edi')}{cell(p, 'edi_true_theta'):>12}"
                      f"{cell(p, 'blurry')}{cell(h, 'fusiongs')}{cell(h, 'edi_carried')}")
     return "\n".join(lines)
-
-
-def run_all(tasks: Sequence[PieceTask], intro: str, *, jobs: int | None, executor: str,
-            address: str | None, log: Callable[..., None], label: str = "") -> list[dict]:
-    """Run the pieces ``tasks`` (:func:`run_piece`), ``jobs`` at a time (None or 0: one per core),
-    logging ``intro`` with the plan first and one line per finished piece (``label`` before its
-    name); returns their rows in the order of ``tasks``."""
-    jobs = default_jobs(len(tasks)) if jobs in (None, 0) else jobs
-    log(f"{intro}: {len(tasks)} to run, {jobs} at a time ({executor})")
-
-    def done(row: dict) -> None:
-        what = row.get("error") or f"{row['wall_seconds'] / 60:.1f} min"
-        log(f"{label}{row['name']}: {row['status']} ({what})")
-
-    return run_pieces(run_piece, tasks, jobs=jobs, executor=executor, on_done=done, address=address)
-
-
-def raise_failed(rows: Sequence[dict], what: str, out: Path) -> None:
-    """After every piece ran: one :class:`FusionGSError` line naming the failed ones, if any."""
-    failed = [r for r in rows if r["status"] != "done"]
-    if failed:
-        names = "; ".join(f"{r['name']}: {r.get('error', 'failed')}" for r in failed)
-        raise FusionGSError(f"{len(failed)} of {len(rows)} {what}(s) failed ({names}); the others are "
-                            f"finished in {out}; fix them and run again with --resume")
 
 
 def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None = None,
@@ -201,9 +116,9 @@ def run_dataset(root: str | Path, out: str | Path, *, config: str | Path | None 
         tasks.append(PieceTask(scene.name, str(scene), str(out / scene.name),
                                None if config is None else str(config), tuple(overrides),
                                None if calibration is None else str(calibration),
-                               None if holdout is None else str(holdout), resume, whole=True))
+                               None if holdout is None else str(holdout), resume))
     for row in run_all(tasks, f"{len(scenes)} recording(s) in {root}", jobs=jobs, executor=executor,
-                       address=address, log=log):
+                       address=address, log=log, deblur=deblur_recording):
         rows[row["name"]] = row
     ordered = [rows[s.name] for s in scenes]
     write_text(out / SUMMARY_FILE, json.dumps({"root": str(root), "recordings": ordered}, indent=2) + "\n")

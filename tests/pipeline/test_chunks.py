@@ -20,7 +20,7 @@ from fusiongs.pipeline.chunks import (
     plan_chunks,
     scene_span,
 )
-from fusiongs.pipeline.dataset import PIECE_FILE
+from fusiongs.pipeline.pieces import PIECE_FILE
 from fusiongs.train.checkpoint import load_checkpoint
 from tests.conftest import TINY, simulated_scene
 from tests.kill import run_killed

@@ -11,8 +11,9 @@ import pytest
 
 from fusiongs.cli import main
 from fusiongs.errors import InputError
-from fusiongs.pipeline.dataset import PIECE_FILE, SUMMARY_FILE, dataset_scenes, format_summary
+from fusiongs.pipeline.dataset import SUMMARY_FILE, dataset_scenes, format_summary
 from fusiongs.pipeline.executor import default_jobs, run_pieces, worker_threads
+from fusiongs.pipeline.pieces import PIECE_FILE
 from tests.conftest import TINY
 
 
