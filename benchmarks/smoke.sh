@@ -77,6 +77,8 @@ check bench_deblur.py -- "$PY" $B/bench_deblur.py --smoke --presets boxes --seed
   --out "$T/deblur" "${TINY[@]}"
 check bench_walk.py -- "$PY" $B/bench_walk.py --smoke --split tuning --seeds 0 --duration 0.6 --frames 8 \
   --chunks 0,0.3 --root "$T/walk" -- "${TINY[@]}" chunk.overlap=0.1
+check bench_scaling.py -- "$PY" $B/bench_scaling.py --smoke --split test --seeds 1000 --cases 48x36:5,64x48:5 \
+  --root "$T/scaling" -- "${TINY[@]}"
 check bench_event_only_sweep.py -- "$PY" $B/bench_event_only_sweep.py --split test --seeds 1000 \
   --size 48x36 --duration 0.3 --root "$T/event_only" --json "$T/event_only.json" "${TINY[@]}"
 check "bench_gpu.py render" --note "CPU: --device cpu" -- \

@@ -1,0 +1,153 @@
+"""How the cost of ``fusiongs deblur`` grows with the sensor's pixels and with the number of frames,
+beside its quality and EDI with the true thresholds, measured in the same run.
+
+Each case ``WxH:F`` draws the seed's scene from the simulator's sweep (its preset, sensor, events
+and frame response) at ``W``x``H`` with ``F`` frames at the sweep's 12 frames a second (so ``F``
+frames last ``F / 12`` s and a clip longer than ``chunk.seconds`` is cut in chunks, as the default
+does), and deblurs it with the default configuration (plus any overrides) in a child process, so
+that its wall time and peak memory (largest resident set of the run and its workers) are its own.
+Where the time goes comes from the run's ``history.jsonl``: the seconds of the half-resolution
+warm-up steps (no events), of the full-resolution steps with events, and everything else
+(calibration, EDI, stereo initialisation, outputs and scoring). The last columns give each case's
+wall time and seconds per full-resolution step against the first case's, measured in this run.
+
+    PYTHONPATH=. python benchmarks/bench_scaling.py --split test --seeds 1000 \\
+        --cases 173x130:24,346x260:24,640x480:24
+    PYTHONPATH=. python benchmarks/bench_scaling.py --split test --seeds 1000 \\
+        --cases 173x130:12,173x130:48,173x130:192
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from benchmarks._sweep import SMOKE_SCENE  # noqa: E402
+from benchmarks.bench_calibrate import parse_seeds  # noqa: E402
+from benchmarks.bench_walk import run_variant  # noqa: E402
+from fusiongs.sim.simulate import run_simulation  # noqa: E402
+from fusiongs.sim.sweep import sweep_scene_config  # noqa: E402
+from fusiongs.sim.write import write_simulated_scene  # noqa: E402
+
+FPS = 12.0  # the sweep's frame rate (12 frames in its 1 s scenes)
+
+
+def parse_case(text: str) -> tuple[int, int, int]:
+    """``"173x130:24"`` -> ``(173, 130, 24)``; raises SystemExit naming the bad case."""
+    try:
+        size, frames = text.split(":")
+        w, h = (int(v) for v in size.split("x"))
+        return w, h, int(frames)
+    except ValueError:
+        raise SystemExit(f"bench_scaling: --cases: expected WxH:FRAMES, got {text!r}") from None
+
+
+def case_scene(root: Path, seed: int, split: str, w: int, h: int, frames: int, smoke: bool = False) -> Path:
+    """The seed's scene at ``w`` x ``h`` with ``frames`` frames under ``root`` (simulated on first use)."""
+    path = root / (f"{split}_{seed}_{w}x{h}_{frames}f" + ("_smoke" if smoke else ""))
+    if not (path / "scene.json").is_file():
+        cfg = sweep_scene_config(seed, split)
+        cfg = dataclasses.replace(cfg, width=w, height=h, frames=frames, duration=frames / FPS)
+        if smoke:
+            cfg = dataclasses.replace(cfg, **(SMOKE_SCENE | {"width": w, "height": h, "frames": frames,
+                                                             "duration": frames / FPS}))
+        res = run_simulation(cfg.validate())
+        write_simulated_scene(res.scene, res.gt, path, stats=res.stats, overwrite=True)
+    return path
+
+
+def phase_seconds(out: Path) -> dict[str, float]:
+    """Seconds and steps of the warm-up (no events) and event phases, summed over the run's
+    ``history.jsonl`` files (one per chunk in a chunked run)."""
+    files = [out / "history.jsonl"] if (out / "history.jsonl").is_file() else \
+        sorted(out.glob("chunks/*/run/history.jsonl"))
+    acc = {"warm_s": 0.0, "warm_steps": 0, "event_s": 0.0, "event_steps": 0}
+    for f in files:
+        for line in f.read_text().splitlines():
+            row = json.loads(line)
+            key = "event" if row["event_weight"] else "warm"
+            acc[f"{key}_s"] += row["step_seconds"]
+            acc[f"{key}_steps"] += 1
+    return acc
+
+
+def row_of(seed: int, w: int, h: int, frames: int, res: dict, out: Path) -> dict:
+    mean = res["metrics"]["mean"]["deblur"]
+    ph = phase_seconds(out)
+    index = out / "chunks.json"
+    chunks = len(json.loads(index.read_text())["chunks"]) if index.is_file() else 1
+    return {"seed": seed, "size": f"{w}x{h}", "pixels": w * h, "frames": frames, "chunks": chunks,
+            "wall_s": res["wall_s"], "peak_gb": res["peak_gb"],
+            "warm_s": ph["warm_s"], "event_s": ph["event_s"],
+            "warm_s_per_step": ph["warm_s"] / max(ph["warm_steps"], 1),
+            "event_s_per_step": ph["event_s"] / max(ph["event_steps"], 1),
+            "other_s": res["wall_s"] - ph["warm_s"] - ph["event_s"],
+            "fusiongs": mean["fusiongs"]["psnr"], "blurry": mean["blurry"]["psnr"],
+            "edi_true": mean["edi_true_theta"]["psnr"]}
+
+
+def format_rows(rows: list[dict]) -> str:
+    head = (f"{'seed':>6}{'size':>9}{'frames':>7}{'chunks':>7}{'wall s':>8}{'warm-up s':>10}{'s/step':>8}"
+            f"{'events s':>9}{'s/step':>8}{'other s':>8}{'peak GB':>8}{'blurry':>7}{'EDI true θ':>11}"
+            f"{'fusiongs':>9}{'vs EDI':>7}{'wall ×':>7}{'step ×':>7}")
+    lines = [head]
+    ref = rows[0] if rows else None
+    for r in rows:
+        lines.append(f"{r['seed']:>6}{r['size']:>9}{r['frames']:>7}{r['chunks']:>7}{r['wall_s']:>8.0f}"
+                     f"{r['warm_s']:>10.0f}{r['warm_s_per_step']:>8.3f}{r['event_s']:>9.0f}"
+                     f"{r['event_s_per_step']:>8.3f}{r['other_s']:>8.0f}{r['peak_gb']:>8.2f}{r['blurry']:>7.2f}"
+                     f"{r['edi_true']:>11.2f}{r['fusiongs']:>9.2f}{r['fusiongs'] - r['edi_true']:>+7.2f}"
+                     f"{r['wall_s'] / ref['wall_s']:>7.2f}"
+                     f"{r['event_s_per_step'] / max(ref['event_s_per_step'], 1e-9):>7.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--split", choices=("tuning", "test"), default="tuning")
+    ap.add_argument("--seeds", default="0", help="e.g. 1000 or 1000-1002")
+    ap.add_argument("--cases", default="173x130:24,346x260:24,640x480:24",
+                    help="WxH:FRAMES,... (the first is the reference of the last two columns)")
+    ap.add_argument("--jobs", type=int, default=0, help="--jobs of each run (0: one per core)")
+    ap.add_argument("--root", default="bench_out/scaling")
+    ap.add_argument("--tag", default="", help="names this set of overrides in the run folders")
+    ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("--smoke", action="store_true", help="tiny scenes (CI's smoke run)")
+    ap.add_argument("overrides", nargs="*", help="config overrides for every run (after --)")
+    args = ap.parse_args(argv)
+    root = Path(args.root)
+    cases = [parse_case(c) for c in args.cases.split(",")]
+    rows = []
+    for seed in parse_seeds(args.seeds):
+        for w, h, frames in cases:
+            scene = case_scene(root / "scenes", seed, args.split, w, h, frames, args.smoke)
+            out = root / "runs" / (scene.name + (f"_{args.tag}" if args.tag else ""))
+            # chunk.seconds as configured: run_variant sets it, so pass the default's value through
+            res = run_variant(scene, out, _chunk_seconds(args.overrides), args.jobs, args.overrides)
+            rows.append(row_of(seed, w, h, frames, res, out))
+            print(json.dumps(rows[-1]), flush=True)
+    print(format_rows(rows))
+    if args.json:
+        Path(args.json).write_text(json.dumps(rows, indent=2) + "\n")
+    return 0
+
+
+def _chunk_seconds(overrides: list[str]) -> float:
+    """``chunk.seconds`` of the runs: the last override of it, else the default configuration's."""
+    from fusiongs.train.settings import DeblurConfig
+
+    value = DeblurConfig().chunk.seconds
+    for o in overrides:
+        if o.startswith("chunk.seconds="):
+            value = float(o.split("=", 1)[1])
+    return value
+
+
+if __name__ == "__main__":
+    sys.exit(main())
