@@ -8,8 +8,10 @@ does), and deblurs it with the default configuration (plus any overrides) in a c
 that its wall time and peak memory (largest resident set of the run and its workers) are its own.
 Where the time goes comes from the run's ``history.jsonl``: the seconds of the half-resolution
 warm-up steps (no events), of the full-resolution steps with events, and everything else
-(calibration, EDI, stereo initialisation, outputs and scoring). The last columns give each case's
-wall time and seconds per full-resolution step against the first case's, measured in this run.
+(calibration, EDI, stereo initialisation, outputs and scoring); "boxes" is how many of the final
+Gaussians' projected 3σ boxes cover a pixel on average, which the compositing's work per pixel
+follows. The last columns give each case's wall time and seconds per full-resolution step against
+the first case's, measured in this run.
 
     PYTHONPATH=. python benchmarks/bench_scaling.py --split test --seeds 1000 \\
         --cases 173x130:24,346x260:24,640x480:24
@@ -77,6 +79,35 @@ def phase_seconds(out: Path) -> dict[str, float]:
     return acc
 
 
+def boxes_per_pixel(out: Path, instants: int = 4) -> float:
+    """Mean number of the final Gaussians whose pixel box (their projected 3σ extent) covers a
+    pixel, over ``instants`` instants spread through the run (its first chunk's, when chunked): the
+    compositing's work per pixel grows with it."""
+    import numpy as np
+    import torch
+
+    from fusiongs.render._cpu_layout import depth_keys, visible_layout
+    from fusiongs.render.cpu import project_cpu
+    from fusiongs.train.restore import restore_state
+
+    ckpt = out / "checkpoint.pt"
+    if not ckpt.is_file():
+        ckpt = sorted(out.glob("chunks/*/run/checkpoint.pt"))[0]
+    state, cam, _ = restore_state(ckpt)
+    traj, m = state.trajectory, state.model
+    t = torch.linspace(traj.t_min, traj.t_max, instants, dtype=torch.float64)
+    viewmats = traj.w2c(t).to(m.means.dtype)
+    Ks = cam.K(dtype=m.means.dtype).expand(instants, 3, 3)
+    with torch.no_grad():
+        proj = project_cpu(m.means, m.rotations, m.scales, m.opacities, viewmats, Ks, cam.width,
+                           cam.height, 0.01, 1e10, 0.3)
+        keys, bits = depth_keys(proj.depths.numpy())
+        _, box, _ = visible_layout(keys, bits, proj.radii.numpy(), proj.means2d.numpy(), cam.width,
+                                   cam.height)
+    area = (np.maximum(box[:, 1] - box[:, 0] + 1, 0) * np.maximum(box[:, 3] - box[:, 2] + 1, 0)).sum()
+    return float(area) / (instants * cam.width * cam.height)
+
+
 def row_of(seed: int, w: int, h: int, frames: int, res: dict, out: Path) -> dict:
     mean = res["metrics"]["mean"]["deblur"]
     ph = phase_seconds(out)
@@ -88,20 +119,21 @@ def row_of(seed: int, w: int, h: int, frames: int, res: dict, out: Path) -> dict
             "warm_s_per_step": ph["warm_s"] / max(ph["warm_steps"], 1),
             "event_s_per_step": ph["event_s"] / max(ph["event_steps"], 1),
             "other_s": res["wall_s"] - ph["warm_s"] - ph["event_s"],
+            "boxes_per_pixel": boxes_per_pixel(out),
             "fusiongs": mean["fusiongs"]["psnr"], "blurry": mean["blurry"]["psnr"],
             "edi_true": mean["edi_true_theta"]["psnr"]}
 
 
 def format_rows(rows: list[dict]) -> str:
     head = (f"{'seed':>6}{'size':>9}{'frames':>7}{'chunks':>7}{'wall s':>8}{'warm-up s':>10}{'s/step':>8}"
-            f"{'events s':>9}{'s/step':>8}{'other s':>8}{'peak GB':>8}{'blurry':>7}{'EDI true θ':>11}"
-            f"{'fusiongs':>9}{'vs EDI':>7}{'wall ×':>7}{'step ×':>7}")
+            f"{'events s':>9}{'s/step':>8}{'other s':>8}{'boxes':>7}{'peak GB':>8}{'blurry':>7}"
+            f"{'EDI true θ':>11}{'fusiongs':>9}{'vs EDI':>7}{'wall ×':>7}{'step ×':>7}")
     lines = [head]
     ref = rows[0] if rows else None
     for r in rows:
         lines.append(f"{r['seed']:>6}{r['size']:>9}{r['frames']:>7}{r['chunks']:>7}{r['wall_s']:>8.0f}"
                      f"{r['warm_s']:>10.0f}{r['warm_s_per_step']:>8.3f}{r['event_s']:>9.0f}"
-                     f"{r['event_s_per_step']:>8.3f}{r['other_s']:>8.0f}{r['peak_gb']:>8.2f}{r['blurry']:>7.2f}"
+                     f"{r['event_s_per_step']:>8.3f}{r['other_s']:>8.0f}{r['boxes_per_pixel']:>7.0f}{r['peak_gb']:>8.2f}{r['blurry']:>7.2f}"
                      f"{r['edi_true']:>11.2f}{r['fusiongs']:>9.2f}{r['fusiongs'] - r['edi_true']:>+7.2f}"
                      f"{r['wall_s'] / ref['wall_s']:>7.2f}"
                      f"{r['event_s_per_step'] / max(ref['event_s_per_step'], 1e-9):>7.2f}")
