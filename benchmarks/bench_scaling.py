@@ -33,7 +33,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from benchmarks._sweep import SMOKE_SCENE  # noqa: E402
 from benchmarks.bench_calibrate import parse_seeds  # noqa: E402
-from benchmarks.bench_walk import run_variant  # noqa: E402
+from benchmarks.bench_walk import add_run_arguments, run_variant  # noqa: E402
 from fusiongs.sim.simulate import run_simulation  # noqa: E402
 from fusiongs.sim.sweep import sweep_scene_config  # noqa: E402
 from fusiongs.sim.write import write_simulated_scene  # noqa: E402
@@ -148,12 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0", help="e.g. 1000 or 1000-1002")
     ap.add_argument("--cases", default="173x130:24,346x260:24,640x480:24",
                     help="WxH:FRAMES,... (the first is the reference of the last two columns)")
-    ap.add_argument("--jobs", type=int, default=0, help="--jobs of each run (0: one per core)")
-    ap.add_argument("--root", default="bench_out/scaling")
-    ap.add_argument("--tag", default="", help="names this set of overrides in the run folders")
-    ap.add_argument("--json", default=None, help="write the rows here")
-    ap.add_argument("--smoke", action="store_true", help="tiny scenes (CI's smoke run)")
-    ap.add_argument("overrides", nargs="*", help="config overrides for every run (after --)")
+    add_run_arguments(ap, "bench_out/scaling")
     args = ap.parse_args(argv)
     root = Path(args.root)
     cases = [parse_case(c) for c in args.cases.split(",")]
@@ -162,25 +157,13 @@ def main(argv: list[str] | None = None) -> int:
         for w, h, frames in cases:
             scene = case_scene(root / "scenes", seed, args.split, w, h, frames, args.smoke)
             out = root / "runs" / (scene.name + (f"_{args.tag}" if args.tag else ""))
-            # chunk.seconds as configured: run_variant sets it, so pass the default's value through
-            res = run_variant(scene, out, _chunk_seconds(args.overrides), args.jobs, args.overrides)
+            res = run_variant(scene, out, None, args.jobs, args.overrides)  # chunk.seconds as configured
             rows.append(row_of(seed, w, h, frames, res, out))
             print(json.dumps(rows[-1]), flush=True)
     print(format_rows(rows))
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=2) + "\n")
     return 0
-
-
-def _chunk_seconds(overrides: list[str]) -> float:
-    """``chunk.seconds`` of the runs: the last override of it, else the default configuration's."""
-    from fusiongs.train.settings import DeblurConfig
-
-    value = DeblurConfig().chunk.seconds
-    for o in overrides:
-        if o.startswith("chunk.seconds="):
-            value = float(o.split("=", 1)[1])
-    return value
 
 
 if __name__ == "__main__":

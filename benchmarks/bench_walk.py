@@ -64,10 +64,12 @@ def walk_scene(root: Path, seed: int, split: str, size: str, duration: float, fr
     return path
 
 
-def run_variant(scene: Path, out: Path, chunk: float, jobs: int, overrides: list[str]) -> dict:
-    """``fusiongs deblur`` in a child process; its wall time, peak memory and metrics."""
+def run_variant(scene: Path, out: Path, chunk: float | None, jobs: int, overrides: list[str]) -> dict:
+    """``fusiongs deblur`` in a child process (``chunk.seconds`` set to ``chunk`` unless None); its
+    wall time, peak memory and metrics."""
+    chunking = [] if chunk is None else [f"chunk.seconds={chunk:g}"]
     cmd = [sys.executable, "-m", "fusiongs", "deblur", str(scene), "-o", str(out), "--jobs", str(jobs),
-           "output.progress=false", f"chunk.seconds={chunk:g}", *overrides]
+           "output.progress=false", *chunking, *overrides]
     start = time.perf_counter()
     proc = subprocess.run([sys.executable, "-c", PEAK, *cmd], capture_output=True, text=True)
     wall = time.perf_counter() - start
@@ -127,6 +129,17 @@ def format_rows(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def add_run_arguments(ap: argparse.ArgumentParser, root: str) -> None:
+    """The options of the benchmarks that deblur simulated scenes in child processes (this one and
+    bench_scaling.py): --jobs, --root, --tag, --json, --smoke and the config overrides."""
+    ap.add_argument("--jobs", type=int, default=0, help="--jobs of each run (0: one per core)")
+    ap.add_argument("--root", default=root)
+    ap.add_argument("--tag", default="", help="names this set of overrides in the run folders and rows")
+    ap.add_argument("--json", default=None, help="write the rows here")
+    ap.add_argument("--smoke", action="store_true", help="tiny scenes (CI's smoke run)")
+    ap.add_argument("overrides", nargs="*", help="config overrides for every run (after --)")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--split", choices=("tuning", "test"), default="tuning")
@@ -135,12 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--duration", type=float, default=20.0)
     ap.add_argument("--frames", type=int, default=240)
     ap.add_argument("--chunks", default="0,10", help="chunk.seconds values to compare (0: one piece)")
-    ap.add_argument("--jobs", type=int, default=0, help="--jobs of each run (0: one per core)")
-    ap.add_argument("--root", default="bench_out/walk")
-    ap.add_argument("--tag", default="", help="names this set of overrides in the run folders and rows")
-    ap.add_argument("--json", default=None, help="write the rows here")
-    ap.add_argument("--smoke", action="store_true", help="tiny scenes (CI's smoke run)")
-    ap.add_argument("overrides", nargs="*", help="config overrides for every run (after --)")
+    add_run_arguments(ap, "bench_out/walk")
     args = ap.parse_args(argv)
     root = Path(args.root)
     rows = []
