@@ -18,6 +18,11 @@ float32 lanes with AVX-512, 8 with AVX2):
   colours the forward pass also computes each pixel's alpha in that same pass (7-9 % less forward
   time, the same images bit for bit), while the backward pass keeps its
   three passes (fused, in full or in part, it was no faster);
+- each entry's mean, conic, opacity and colours are copied once per render into one record in
+  entry order (:func:`pack_entries`), so that a row's entries, which come in entry order, are read
+  from consecutive records instead of gathered by Gaussian index from ten arrays (on a trained
+  173x130 model's nine views, forward 5 % and backward 13 % less time, the same results bit for
+  bit);
 - the forward pass shrinks each row's span to the pixels still below the stop transmittance, and
   the backward pass skips, before any per-pixel work, entries behind the last contributing entry of
   every pixel they cover (most entries of saturated rows).
@@ -28,12 +33,14 @@ these kernels with them is tested in ``tests/render/test_cpu_simd.py``.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic
 
-from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, row_range_lim, store_geometry_grads
+from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, store_geometry_grads
 
 F = np.float32
 U = np.uint64
@@ -78,6 +85,47 @@ def alpha_limits(op: np.ndarray) -> np.ndarray:
     return 2.0 * np.log(o / ALPHA_T) * (1.0 + 1e-6) + 1e-6
 
 
+@njit(cache=True, parallel=True)
+def pack_entries(ids, cam_off, mx, my, ca, cb, cc, op, lim, col):  # pragma: no cover - numba
+    """``(pk [P, 6 + D] float32, limk [P] float64)``: each entry's mean, conic, opacity and colours,
+    and its alpha limit, in entry order (one record per entry instead of gathers by Gaussian)."""
+    C = cam_off.shape[0] - 1
+    D = col.shape[2]
+    P = ids.shape[0]
+    pk = np.empty((P, 6 + D), np.float32)
+    limk = np.empty(P, np.float64)
+    for c in range(C):
+        for k in prange(cam_off[c], cam_off[c + 1]):
+            g = ids[k]
+            pk[k, 0] = mx[c, g]
+            pk[k, 1] = my[c, g]
+            pk[k, 2] = ca[c, g]
+            pk[k, 3] = cb[c, g]
+            pk[k, 4] = cc[c, g]
+            pk[k, 5] = op[c, g]
+            for d in range(D):
+                pk[k, 6 + d] = col[c, g, d]
+            limk[k] = lim[c, g]
+    return pk, limk
+
+
+@njit(cache=True, inline="always")
+def row_range_pk(k, y, box, pk, lim):  # pragma: no cover - numba
+    """``_cpu_kernels.row_range_lim`` of entry k from its packed record."""
+    dy = pk[k, 1] - (y + 0.5)
+    a = pk[k, 2]
+    b = pk[k, 3]
+    disc = (b * dy) ** 2 - a * (pk[k, 4] * dy * dy - lim)
+    if disc < 0.0 or a <= 0.0:
+        return 0, -1
+    s = math.sqrt(disc)
+    lo = (-b * dy - s) / a
+    hi = (-b * dy + s) / a
+    x0 = max(box[k, 0], int(math.ceil(pk[k, 0] - hi - 0.5)))
+    x1 = min(box[k, 1], int(math.floor(pk[k, 0] - lo - 0.5)))
+    return x0, x1
+
+
 @njit(cache=True, inline="always", fastmath={"contract"})
 def _lane_gauss(mxg, x, ha, bdy, cyy):  # pragma: no cover - numba
     """``(dx, sigma, exp(-sigma))`` of pixel x of a row: ``sigma = ha dx² + bdy dx + cyy``, the
@@ -109,10 +157,12 @@ def _lane_front(mxg, x, ha, bdy, cyy, o, xe, kk, trow, alive, lrow):  # pragma: 
 
 
 @njit(cache=True, parallel=True, fastmath={"contract"}, error_model="numpy")
-def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, width,
+def forward(box, row_off, rows, pk, limk, height, width,
             img, tfin, last):  # pragma: no cover - numba
-    """``_cpu_kernels.forward`` for float32 arrays, plus ``lim`` from :func:`alpha_limits`."""
-    D = col.shape[2]
+    """``_cpu_kernels.forward`` for float32 arrays, the Gaussians' values read from the records
+    ``pk`` and alpha limits ``limk`` of :func:`pack_entries` (in place of ``ids`` and the per-Gaussian
+    arrays)."""
+    D = pk.shape[1] - 6
     for task in prange(row_off.shape[0] - 1):
         c = task // height
         y = task % height
@@ -127,25 +177,24 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
         py = F(y) + F(0.5)
         for r in range(row_off[task], row_off[task + 1]):
             k = rows[r]
-            g = ids[k]
-            x0, x1 = row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim[c, g])
+            x0, x1 = row_range_pk(k, y, box, pk, limk[k])
             x0 = max(x0, lo)
             x1 = min(x1, hi)
             if x1 < x0:
                 continue
-            dy = my[c, g] - py
-            ha = F(0.5) * ca[c, g]
-            bdy = cb[c, g] * dy
-            cyy = F(0.5) * cc[c, g] * dy * dy
-            o = op[c, g]
-            mxg = mx[c, g] - F(0.5)
+            dy = pk[k, 1] - py
+            ha = F(0.5) * pk[k, 2]
+            bdy = pk[k, 3] * dy
+            cyy = F(0.5) * pk[k, 4] * dy * dy
+            o = pk[k, 5]
+            mxg = pk[k, 0] - F(0.5)
             kk = np.int32(k)
             xe = U(x1)
             n_stop = 0
             if D == 3:  # one pass: each pixel's alpha and its three colours together
-                c0 = col[c, g, 0]
-                c1 = col[c, g, 1]
-                c2 = col[c, g, 2]
+                c0 = pk[k, 6]
+                c1 = pk[k, 7]
+                c2 = pk[k, 8]
                 for blk in range(U(x0), U(x1 + 1), U(LANES)):
                     for lane in range(U(LANES)):
                         x = blk + lane
@@ -161,7 +210,7 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
                         wbuf[x], stop = _lane_front(mxg, x, ha, bdy, cyy, o, xe, kk, trow, alive, lrow)
                         n_stop += 1 if stop else 0
                 for d in range(D):
-                    cd = col[c, g, d]
+                    cd = pk[k, 6 + d]
                     for blk in range(U(x0), U(x1 + 1), U(LANES)):
                         for lane in range(U(LANES)):
                             x = blk + lane
@@ -181,11 +230,11 @@ def forward(ids, box, row_off, rows, mx, my, ca, cb, cc, op, lim, col, height, w
 
 
 @njit(cache=True, parallel=True, fastmath={"contract", "reassoc"}, error_model="numpy")
-def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, op, lim, col, height, width,
+def backward(box, row_off, row_end, rows, entry_row0, pk, limk, height, width,
              tfin, last, v_img, v_alpha, gbuf):  # pragma: no cover - numba
-    """``_cpu_kernels.backward`` for float32 arrays (rows ``row_off[task]:row_end[task]``), plus
-    ``lim`` (sums reassociated)."""
-    D = col.shape[2]
+    """``_cpu_kernels.backward`` for float32 arrays (rows ``row_off[task]:row_end[task]``), the
+    Gaussians' values read from :func:`pack_entries`' ``pk`` and ``limk`` (sums reassociated)."""
+    D = pk.shape[1] - 6
     for task in prange(row_off.shape[0] - 1):
         c = task // height
         y = task % height
@@ -215,9 +264,8 @@ def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, o
             k = rows[r]
             if k > row_last:
                 continue  # behind every pixel's last entry: no gradient (gbuf starts zeroed)
-            g = ids[k]
             e = entry_row0[k] + y - box[k, 2]
-            x0, x1 = row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim[c, g])
+            x0, x1 = row_range_pk(k, y, box, pk, limk[k])
             if x1 < x0:
                 continue
             reach = np.int32(-1)
@@ -225,15 +273,15 @@ def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, o
                 reach = max(reach, lrow[x])
             if np.int32(k) > reach:
                 continue  # behind the last entry of each pixel in its range
-            dy = my[c, g] - py
-            a = ca[c, g]
-            b = cb[c, g]
-            cz = cc[c, g]
+            dy = pk[k, 1] - py
+            a = pk[k, 2]
+            b = pk[k, 3]
+            cz = pk[k, 4]
             ha = F(0.5) * a
             bdy = b * dy
             cyy = F(0.5) * cz * dy * dy
-            o = op[c, g]
-            mxg = mx[c, g] - F(0.5)
+            o = pk[k, 5]
+            mxg = pk[k, 0] - F(0.5)
             kk = np.int32(k)
             xe = U(x1)
             for blk in range(U(x0), U(x1 + 1), U(LANES)):
@@ -252,9 +300,9 @@ def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, o
                     gbx[x] = gauss if valid & (og <= F(MAX_A)) else F(0.0)
                     vabuf[x] = F(0.0)
             if D == 3:
-                c0 = col[c, g, 0]
-                c1 = col[c, g, 1]
-                c2 = col[c, g, 2]
+                c0 = pk[k, 6]
+                c1 = pk[k, 7]
+                c2 = pk[k, 8]
                 g0 = F(0.0)
                 g1 = F(0.0)
                 g2 = F(0.0)
@@ -281,7 +329,7 @@ def backward(ids, box, row_off, row_end, rows, entry_row0, mx, my, ca, cb, cc, o
                 gbuf[e, 8] = g2
             else:
                 for d in range(D):
-                    cd = col[c, g, d]
+                    cd = pk[k, 6 + d]
                     g_col = F(0.0)
                     for blk in range(U(x0), U(x1 + 1), U(LANES)):
                         for lane in range(U(LANES)):

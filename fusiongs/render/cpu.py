@@ -1,7 +1,8 @@
 """CPU backend: numba kernels behind torch autograd Functions (projection and compositing).
 
 Compositing: float32 inputs use the SIMD kernels of ``_cpu_simd``; float64 inputs the scalar
-kernels of ``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on). The
+kernels of ``_cpu_kernels`` (the precise path that gradcheck and the parity tests run on); the SIMD
+kernels read each entry's values from one record (``_cpu_simd.pack_entries``, made per render). The
 entries' depth order and pixel boxes come from ``_cpu_layout`` (a numba radix sort; the same as the
 torch reference in ``_boxes``), and the backward pass leaves out cameras whose outputs get no
 gradient (:func:`row_ends`). The projection (``_cpu_projection``) computes in float64 and returns
@@ -76,13 +77,15 @@ class CompositeCPU(torch.autograd.Function):
         col = _np(colors)
         ids_np, box_np, off_np = _np(ids), _np(box), _np(cam_off)
         simd = _use_simd(npd, len(ids_np))
-        if simd:  # the SIMD kernels take the per-entry alpha limits after the opacities
-            arrs = arrs + (S.alpha_limits(arrs[5]),)
         row_off, rows, entry_row0 = K.row_lists(box_np, off_np, height)
         img = np.zeros((C, height, width, D), npd)
         tfin = np.empty((C, height, width), npd)
         last = np.empty((C, height, width), np.int64)
-        (S if simd else K).forward(ids_np, box_np, row_off, rows, *arrs, col, height, width, img, tfin, last)
+        if simd:  # the SIMD kernels read one record per entry (with its alpha limit)
+            arrs = S.pack_entries(ids_np, off_np, *arrs, S.alpha_limits(arrs[5]), col)
+            S.forward(box_np, row_off, rows, *arrs, height, width, img, tfin, last)
+        else:
+            K.forward(ids_np, box_np, row_off, rows, *arrs, col, height, width, img, tfin, last)
         ctx.saved = (ids_np, box_np, off_np, row_off, rows, entry_row0, arrs, col, tfin, last, width,
                      height, simd)
         img_t = torch.from_numpy(img)
@@ -99,8 +102,12 @@ class CompositeCPU(torch.autograd.Function):
         v_alpha_np = np.ascontiguousarray(_np(v_alpha)[..., 0].astype(npd, copy=False))
         gbuf = np.zeros((int(entry_row0[-1]), 6 + D), npd)
         row_end = row_ends(row_off, _idle_cameras(v_img_np, v_alpha_np), height)
-        (S if simd else K).backward(ids_np, box_np, row_off, row_end, rows, entry_row0, *arrs, col,
-                                    height, width, tfin, last, v_img_np, v_alpha_np, gbuf)
+        if simd:
+            S.backward(box_np, row_off, row_end, rows, entry_row0, *arrs, height, width, tfin, last,
+                       v_img_np, v_alpha_np, gbuf)
+        else:
+            K.backward(ids_np, box_np, row_off, row_end, rows, entry_row0, *arrs, col, height, width,
+                       tfin, last, v_img_np, v_alpha_np, gbuf)
         out = np.zeros((C, N, 6 + D), npd)
         K.reduce_grads(ids_np, off_np, entry_row0, gbuf, out)
         g = torch.from_numpy(out)

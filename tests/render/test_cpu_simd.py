@@ -94,7 +94,7 @@ def _kernel_inputs(case):
     arrs = (f(means2d[..., 0]), f(means2d[..., 1]), f(conics[..., 0]), f(conics[..., 1]),
             f(conics[..., 2]), f(opac))
     row_off, rows, entry_row0 = K.row_lists(box, off.numpy(), H)
-    return gid.numpy(), box, row_off, rows, entry_row0, arrs, f(colors)
+    return gid.numpy(), box, off.numpy(), row_off, rows, entry_row0, arrs, f(colors)
 
 
 def test_simd_forward_matches_the_scalar_float32_kernel_and_last_entries():
@@ -102,13 +102,17 @@ def test_simd_forward_matches_the_scalar_float32_kernel_and_last_entries():
     transmittance and last contributing entry per pixel."""
     case = CASES["width_not_a_multiple_of_16"]
     W, H, C, D = case["W"], case["H"], case["C"], case["D"]
-    ids, box, row_off, rows, _, arrs, col = _kernel_inputs(case)
+    ids, box, off, row_off, rows, _, arrs, col = _kernel_inputs(case)
     outs = []
-    for mod, extra in ((K, ()), (S, (S.alpha_limits(arrs[5]),))):
+    for simd in (False, True):
         img = np.zeros((C, H, W, D), np.float32)
         tfin = np.empty((C, H, W), np.float32)
         last = np.empty((C, H, W), np.int64)
-        mod.forward(ids, box, row_off, rows, *arrs, *extra, col, H, W, img, tfin, last)
+        if simd:
+            pk, limk = S.pack_entries(ids, off, *arrs, S.alpha_limits(arrs[5]), col)
+            S.forward(box, row_off, rows, pk, limk, H, W, img, tfin, last)
+        else:
+            K.forward(ids, box, row_off, rows, *arrs, col, H, W, img, tfin, last)
         outs.append((img, tfin, last))
     np.testing.assert_allclose(outs[1][0], outs[0][0], atol=1e-6)
     np.testing.assert_allclose(outs[1][1], outs[0][1], atol=1e-6)
