@@ -312,6 +312,7 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
         (out / REFINED_FILE).unlink(missing_ok=True)
     if len(scene.frames) == 0:
         log(EVENT_ONLY_NOTE)
+    cfg = tr.config  # with what training derived (blur.n_samples)
     anchor = anchor_run(tr.state, scene, cfg)  # one frame fixes each channel's gain and offset
     write_anchor(out, anchor)  # for `fusiongs render`; an earlier run's is removed when there is none
     unanchored, images, render_only, ply = write_outputs(
@@ -329,7 +330,9 @@ def run_deblur(scene_path: str | Path, out: str | Path, *, config: str | Path | 
     log(f"trained {tr.iteration} iterations in {h.seconds:.1f} s ({h.seconds / n_it:.3f} s/it; "
         f"render forward {h.render_seconds / max(h.seconds, 1e-9):.0%}, backward "
         f"{h.backward_seconds / max(h.seconds, 1e-9):.0%}), {tr.state.model.n} Gaussians, "
-        f"far bound {tr.state.depth_far:.3g}")
+        f"far bound {tr.state.depth_far:.3g}, {cfg.blur.n_samples} renders per exposure"
+        + (f" (image motion {tr.exposure_motion_px:.1f} px, blur.sample_spacing)"
+           if tr.exposure_motion_px is not None else ""))
     heldout = score_holdout(tr, scene, held, kept, k) if held.size else None
     if heldout is not None:
         write_text(out / "heldout.json", json.dumps(heldout[0], indent=2) + "\n")

@@ -66,7 +66,8 @@ class InitSettings:
 
 @dataclass
 class BlurSettings:
-    n_samples: int = 9               # N sharp renders inside each exposure (odd: middle = mid-exposure)
+    n_samples: int = 9               # N sharp renders inside each exposure (odd: middle = mid-exposure);
+                                     # the most N when blur.sample_spacing > 0
     ssim_lambda: float = 0.2         # λ in (1-λ)·L1 + λ·(1-SSIM)
     weight: float = 1.0              # weight of the blur loss
     learn_gain: bool = False         # learnable per-frame exposure gain g_i
@@ -75,12 +76,17 @@ class BlurSettings:
     coarse_n_samples: int | None = 5  # N of the coarse steps (None: n_samples); blur trails are
                                      # coarse_factor times shorter in coarse pixels
     crop: tuple[int, int] | None = None  # (w, h): render a random crop per step; None = whole frame
+    sample_spacing: float = 1.0      # px: N is the fewest odd count >= 5 (at most n_samples) whose
+                                     # renders move at most this far apart in 90 % of the
+                                     # exposures (train/exposure_samples.py); the run's
+                                     # config.yaml holds the N used and 0 here; 0: N = n_samples
 
     def __post_init__(self) -> None:
         for name in ("n_samples", "coarse_factor", "coarse_n_samples"):
             v = getattr(self, name)
             if v is not None and v < 1:
                 raise ConfigError("config", f"blur.{name}", "an integer >= 1", repr(v))
+        _need_positive("blur", self, ("sample_spacing",), zero_ok=True)
         if self.crop is not None and min(self.crop) < 16:
             raise ConfigError("config", "blur.crop", "null or [w, h] with w, h >= 16 pixels",
                               repr(self.crop))

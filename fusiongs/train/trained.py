@@ -27,3 +27,5 @@ class Trained:
     initial_thresholds: SensorThresholds | None = None  # where θ started (calibration)
     # ``threshold.render_floor``'s ``(θ before, θ after)``, ``[2, C]`` host float64, when it ran
     threshold_floor: tuple[torch.Tensor, torch.Tensor] | None = None
+    # the image motion (px, 90 % of the exposures) that set ``config.blur.n_samples``, if it did
+    exposure_motion_px: float | None = None

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,7 @@ from fusiongs.train.data import (
     prepare_data,
     pvc_readouts,
 )
+from fusiongs.train.exposure_samples import derived_samples
 from fusiongs.train.history import FLUSH_EVERY, History, PendingRow, flush_pending, history_row, write_history
 from fusiongs.train.lowpass_term import LowpassHistory
 from fusiongs.train.render_io import auto_exposure
@@ -52,6 +53,8 @@ from fusiongs.train.state import EVENT_ONLY_VIEWS, FusionState, build_state, eve
 from fusiongs.train.step import training_step
 from fusiongs.train.trained import Trained
 from fusiongs.train.truth_probe import probe_psnr, should_probe, truth_probe
+
+MOTION_POINTS = 4096  # initial Gaussians whose motion sizes the renders per exposure (at most)
 
 
 def _densify_config(cfg: DeblurConfig) -> DensifyConfig:
@@ -131,6 +134,24 @@ def build_trajectory(scene: Scene, cfg: DeblurConfig) -> Trajectory:
                       knot_spacing=cfg.knot_spacing or None, outside="clamp", device="cpu")
 
 
+def renders_per_exposure(cfg: DeblurConfig, data: TrainData, state: FusionState
+                         ) -> tuple[DeblurConfig, float | None]:
+    """``(cfg, motion)``: with ``blur.sample_spacing > 0`` and frames, ``cfg`` with
+    ``blur.n_samples`` derived from the exposures' image motion of the initial Gaussians
+    (:func:`~fusiongs.train.exposure_samples.derived_samples`) and the spacing set to 0 (what the
+    run used, as its config.yaml records it), and that motion (px); else ``(cfg, None)``."""
+    b = cfg.blur
+    if b.sample_spacing <= 0 or data.n_frames == 0:
+        return cfg, None
+    ex = data.exposures.detach().cpu().to(torch.float64)
+    means = state.model.means.detach().cpu()
+    points = means[::max(1, len(means) // MOTION_POINTS)]
+    with torch.no_grad():
+        start, end = state.trajectory.c2w(ex[:, 0]), state.trajectory.c2w(ex[:, 1])
+    n, motion = derived_samples(points, start, end, data.camera, b.sample_spacing, b.n_samples)
+    return replace(cfg, blur=replace(b, n_samples=n, sample_spacing=0.0)), motion
+
+
 def _payload(tr: Trained, opts: dict[str, torch.optim.Optimizer], gen: torch.Generator,
              device_gen: torch.Generator, strategy: DensifyStrategy,
              psnr_running: torch.Tensor | None) -> dict[str, Any]:
@@ -208,13 +229,14 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
         data.fast = censor_events(data, cfg, theta0, device)
     if cfg.events.reset_weights and data.events is not None:
         data.event_weight = reset_event_weights(data, theta0, device)
-    if cfg.events.loss == "pvc" and data.events is not None:
-        data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     trajectory = build_trajectory(scene, cfg)
     fill = frame_colour(scene, data, cfg)
     colour_scale = colour_lr_scale(fill)
     state = build_state(data, scene.poses.c2w, trajectory, cfg, device, theta0.as_array(),
                         init_images(scene, data, cfg, fill), fill)
+    cfg, motion = renders_per_exposure(cfg, data, state)
+    if cfg.events.loss == "pvc" and data.events is not None:  # read-outs at the N exposure instants
+        data.pvc_times, data.pvc = pvc_readouts_for(data, cfg, device)
     extent = scene_extent(scene.poses.c2w, state.depth_far)
     start, history = 0, History()
     # the frame order is the first draw of `gen`, made before a checkpoint replaces its state: a
@@ -246,7 +268,7 @@ def train(scene: Scene, cfg: DeblurConfig, out_dir: Path, *, resume: bool = Fals
                 strategy.load_state_dict(ckpt["densify"], state.model.means.device)
             if ckpt.get("psnr_running") is not None:
                 psnr_now = ckpt["psnr_running"].to(device)
-    tr = Trained(state, data, cfg, history, start, scene.poses, theta0)
+    tr = Trained(state, data, cfg, history, start, scene.poses, theta0, exposure_motion_px=motion)
     if ckpt is not None and ckpt.get("threshold_floor") is not None:
         with checkpoint_errors(ckpt_path):
             before, after = (torch.as_tensor(v, dtype=torch.float64) for v in ckpt["threshold_floor"])

@@ -34,6 +34,8 @@ def test_deblur_writes_every_output(tiny_scene, tiny_run):
     assert load_checkpoint(tiny_run / "checkpoint.pt")["iteration"] == 10
     cfg = load_config(DeblurConfig, tiny_run / "config.yaml")
     assert cfg.optim.iterations == 10 and cfg.init.n_points == 300
+    # the renders per exposure were derived from the motion: config.yaml holds the N used, spacing 0
+    assert cfg.blur.n_samples == 3 and cfg.blur.sample_spacing == 0.0
     theta = json.loads((tiny_run / "thresholds.json").read_text())
     assert len(theta["theta_pos"]) == 1 and theta["theta_pos"][0] > 0
     metrics = json.loads((tiny_run / "metrics.json").read_text())
