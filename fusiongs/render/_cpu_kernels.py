@@ -35,23 +35,24 @@ def alpha_limit(o):  # pragma: no cover - numba
 @njit(cache=True, inline="always")
 def _row_range(k, c, g, y, box, mx, my, ca, cb, cc, op):  # pragma: no cover - numba
     """Inclusive x-range of row ``y`` where entry k may reach alpha 1/255 (x1 < x0 if none)."""
-    return row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, alpha_limit(op[c, g]))
+    return row_span(box[k, 0], box[k, 1], mx[c, g], my[c, g], ca[c, g], cb[c, g], cc[c, g], y,
+                    alpha_limit(op[c, g]))
 
 
 @njit(cache=True, inline="always")
-def row_range_lim(k, c, g, y, box, mx, my, ca, cb, cc, lim):  # pragma: no cover - numba
-    """:func:`_row_range` with the :func:`alpha_limit` of the entry given."""
-    dy = my[c, g] - (y + 0.5)
-    a = ca[c, g]
-    b = cb[c, g]
-    disc = (b * dy) ** 2 - a * (cc[c, g] * dy * dy - lim)
+def row_span(bx0, bx1, mxg, myg, a, b, cz, y, lim):  # pragma: no cover - numba
+    """Inclusive x-range, within the box columns ``[bx0, bx1]``, of the pixels of row ``y`` where a
+    Gaussian centred at ``(mxg, myg)`` (px) with conic ``(a, b, cz)`` has ``d^T Σ^-1 d <= lim``
+    (x1 < x0 if none); the shared span of the scalar and the SIMD kernels."""
+    dy = myg - (y + 0.5)
+    disc = (b * dy) ** 2 - a * (cz * dy * dy - lim)
     if disc < 0.0 or a <= 0.0:
         return 0, -1
     s = math.sqrt(disc)
     lo = (-b * dy - s) / a  # dx = mx - (x + 0.5) in [lo, hi]
     hi = (-b * dy + s) / a
-    x0 = max(box[k, 0], int(math.ceil(mx[c, g] - hi - 0.5)))
-    x1 = min(box[k, 1], int(math.floor(mx[c, g] - lo - 0.5)))
+    x0 = max(bx0, int(math.ceil(mxg - hi - 0.5)))
+    x1 = min(bx1, int(math.floor(mxg - lo - 0.5)))
     return x0, x1
 
 

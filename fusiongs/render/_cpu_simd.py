@@ -33,14 +33,12 @@ these kernels with them is tested in ``tests/render/test_cpu_simd.py``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from llvmlite import ir
 from numba import njit, prange, types
 from numba.extending import intrinsic
 
-from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, store_geometry_grads
+from fusiongs.render._cpu_kernels import ALPHA_T, MAX_A, T_STOP, row_span, store_geometry_grads
 
 F = np.float32
 U = np.uint64
@@ -110,20 +108,9 @@ def pack_entries(ids, cam_off, mx, my, ca, cb, cc, op, lim, col):  # pragma: no 
 
 
 @njit(cache=True, inline="always")
-def row_range_pk(k, y, box, pk, lim):  # pragma: no cover - numba
-    """``_cpu_kernels.row_range_lim`` of entry k from its packed record."""
-    dy = pk[k, 1] - (y + 0.5)
-    a = pk[k, 2]
-    b = pk[k, 3]
-    disc = (b * dy) ** 2 - a * (pk[k, 4] * dy * dy - lim)
-    if disc < 0.0 or a <= 0.0:
-        return 0, -1
-    s = math.sqrt(disc)
-    lo = (-b * dy - s) / a
-    hi = (-b * dy + s) / a
-    x0 = max(box[k, 0], int(math.ceil(pk[k, 0] - hi - 0.5)))
-    x1 = min(box[k, 1], int(math.floor(pk[k, 0] - lo - 0.5)))
-    return x0, x1
+def _span(k, y, box, pk, lim):  # pragma: no cover - numba
+    """``_cpu_kernels.row_span`` of entry k in row y, from its packed record."""
+    return row_span(box[k, 0], box[k, 1], pk[k, 0], pk[k, 1], pk[k, 2], pk[k, 3], pk[k, 4], y, lim)
 
 
 @njit(cache=True, inline="always", fastmath={"contract"})
@@ -177,7 +164,7 @@ def forward(box, row_off, rows, pk, limk, height, width,
         py = F(y) + F(0.5)
         for r in range(row_off[task], row_off[task + 1]):
             k = rows[r]
-            x0, x1 = row_range_pk(k, y, box, pk, limk[k])
+            x0, x1 = _span(k, y, box, pk, limk[k])
             x0 = max(x0, lo)
             x1 = min(x1, hi)
             if x1 < x0:
@@ -265,7 +252,7 @@ def backward(box, row_off, row_end, rows, entry_row0, pk, limk, height, width,
             if k > row_last:
                 continue  # behind every pixel's last entry: no gradient (gbuf starts zeroed)
             e = entry_row0[k] + y - box[k, 2]
-            x0, x1 = row_range_pk(k, y, box, pk, limk[k])
+            x0, x1 = _span(k, y, box, pk, limk[k])
             if x1 < x0:
                 continue
             reach = np.int32(-1)
