@@ -100,3 +100,23 @@ class UncalibratedCamera:
 
 SceneCamera = PinholeCamera | UncalibratedCamera
 """The camera of a scene: calibrated, or of known size only."""
+
+
+def world_to_pixels(points: torch.Tensor, c2w: torch.Tensor, camera: PinholeCamera
+                    ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Pixel coordinates and depths of world points seen by posed pinhole cameras (no distortion).
+
+    Args:
+        points: ``[..., M, 3]`` world points (scene units).
+        c2w: ``[..., 4, 4]`` camera-to-world poses (OpenCV axes), broadcast against ``points``'
+            leading dimensions (e.g. ``[F, 4, 4]`` with ``[M, 3]`` gives ``[F, M, ...]``).
+        camera: the intrinsics (px; pixel centres at integer + 0.5).
+
+    Returns:
+        ``(uv [..., M, 2] px, z [..., M])`` in the inputs' dtype; ``z`` is the depth along the
+        optical axis (points with ``z <= 0`` are behind the camera and their ``uv`` meaningless).
+    """
+    cam = (points - c2w[..., None, :3, 3]) @ c2w[..., :3, :3]
+    z = cam[..., 2]
+    uv = torch.stack([camera.fx * cam[..., 0] / z + camera.cx, camera.fy * cam[..., 1] / z + camera.cy], -1)
+    return uv, z

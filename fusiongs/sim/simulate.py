@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import torch
 
-from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.pinhole import PinholeCamera, world_to_pixels
 from fusiongs.errors import InputError
 from fusiongs.events.cfa import check_pattern
 from fusiongs.events.stream import EventStream
@@ -335,13 +335,8 @@ def mean_blur_px(caster: RayCaster, traj, camera: PinholeCamera, t_start: np.nda
     for s, e in zip(t_start, t_end):
         P = torch.as_tensor(traj.c2w(np.array([s, (s + e) / 2, e])), dtype=torch.float32)
         pts = caster.surface_points(P[1])
-        moved = [_project(camera, P[i], pts) for i in (0, 2)]
+        moved = [world_to_pixels(pts, P[i], camera)[0] for i in (0, 2)]
         d = (moved[0] - moved[1]).norm(dim=1)
         vals.append(float(d[torch.isfinite(d)].mean()))
     return float(np.mean(vals))
 
-
-def _project(camera: PinholeCamera, c2w: torch.Tensor, pts: torch.Tensor) -> torch.Tensor:
-    cam = (pts - c2w[:3, 3]) @ c2w[:3, :3]
-    return torch.stack([camera.fx * cam[:, 0] / cam[:, 2] + camera.cx,
-                        camera.fy * cam[:, 1] / cam[:, 2] + camera.cy], dim=1)

@@ -17,7 +17,7 @@ import math
 
 import torch
 
-from fusiongs.camera.pinhole import PinholeCamera
+from fusiongs.camera.pinhole import PinholeCamera, world_to_pixels
 
 MIN_SAMPLES = 5  # the fewest renders per exposure chosen (the coarse steps' default)
 MOTION_QUANTILE = 0.9  # the exposures' motion statistic: this quantile over the frames
@@ -38,17 +38,8 @@ def exposure_motion_px(points: torch.Tensor, c2w_start: torch.Tensor, c2w_end: t
         between their projections at the start and at the end; 0 where no point is seen.
     """
     p = points.to(torch.float64)
-
-    def project(c2w: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        c2w = c2w.to(torch.float64)
-        cam = torch.einsum("fij,fmi->fmj", c2w[:, :3, :3], p[None] - c2w[:, None, :3, 3])  # [F, M, 3]
-        z = cam[..., 2]
-        uv = torch.stack([camera.fx * cam[..., 0] / z + camera.cx,
-                          camera.fy * cam[..., 1] / z + camera.cy], -1)
-        return uv, z
-
-    uv0, z0 = project(c2w_start)
-    uv1, z1 = project(c2w_end)
+    uv0, z0 = world_to_pixels(p, c2w_start.to(torch.float64), camera)  # [F, M, 2], [F, M]
+    uv1, z1 = world_to_pixels(p, c2w_end.to(torch.float64), camera)
     seen = (z0 > 1e-6) & (z1 > 1e-6) & (uv0[..., 0] >= 0) & (uv0[..., 0] <= camera.width) \
         & (uv0[..., 1] >= 0) & (uv0[..., 1] <= camera.height)
     d = (uv1 - uv0).norm(dim=-1).masked_fill(~seen, 0.0)
